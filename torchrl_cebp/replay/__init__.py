@@ -1,0 +1,5 @@
+"""Episode replay: storage of ``[episode, t]`` rows, HER relabelling, and the samplers."""
+from torchrl_cebp.replay.buffer import episode_storage, make_replay_buffer
+from torchrl_cebp.replay.her import HindsightRelabel
+
+__all__ = ["HindsightRelabel", "episode_storage", "make_replay_buffer"]

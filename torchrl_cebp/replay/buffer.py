@@ -1,0 +1,88 @@
+"""An episode replay buffer: TorchRL storage of ``[episode, t]`` rows + any sampler + HER."""
+from __future__ import annotations
+
+from typing import Literal
+
+import torch
+from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.data.replay_buffers.samplers import Sampler
+
+from torchrl_cebp.replay.her import HindsightRelabel, RewardFn
+from torchrl_cebp.replay.samplers import PERSampler, UniformEpisodeSampler
+
+
+def episode_storage(
+    capacity: int = 1_000_000,
+    *,
+    kind: Literal["tensor", "memmap"] = "tensor",
+    scratch_dir: str | None = None,
+    device: torch.device | str = "cpu",
+) -> LazyTensorStorage:
+    """A TorchRL storage holding whole episodes as rows, ``capacity`` counted in transitions.
+
+    With 50-step episodes the default 1e6 transitions is 20,000 episode rows;
+    the buffer's round-robin writer overwrites the oldest episode first.
+
+    Examples:
+        >>> storage = episode_storage(1000)
+        >>> storage.ndim
+        2
+    """
+    if kind == "tensor":
+        return LazyTensorStorage(int(capacity), ndim=2, device=device)
+    if kind == "memmap":
+        return LazyMemmapStorage(int(capacity), ndim=2, scratch_dir=scratch_dir, device=device)
+    raise ValueError(f"unknown storage kind {kind!r}; valid kinds: ['memmap', 'tensor']")
+
+
+def make_replay_buffer(
+    sampler: Sampler | None = None,
+    *,
+    reward_fn: RewardFn,
+    capacity: int = 1_000_000,
+    batch_size: int = 256,
+    future_p: float = 0.8,
+    strategy: Literal["future", "final", "episode"] = "future",
+    storage: Literal["tensor", "memmap"] = "tensor",
+    scratch_dir: str | None = None,
+    device: torch.device | str = "cpu",
+) -> TensorDictReplayBuffer:
+    """Wires an episode storage, a sampler (uniform HER by default) and HER relabelling.
+
+    ``rb.extend(episodes)`` takes a tensordict of shape ``[n_episodes, T]``;
+    ``rb.sample()`` returns ``[batch_size]`` transitions with relabelled goals
+    and rewards, ``"index"`` (``[B, 2]``: episode row, step) and, for samplers
+    with importance-sampling weights, ``"priority_weight"``. With a
+    :class:`~torchrl_cebp.samplers.PERSampler`, ``rb.update_tensordict_priority(batch)``
+    feeds ``batch["td_error"]`` back.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl_cebp.replay import make_replay_buffer
+        >>> from torchrl_cebp.samplers import CEBPSampler
+        >>> reward = lambda ag, g: -(torch.linalg.vector_norm(ag - g, dim=-1, keepdim=True) > 0.05).float()
+        >>> n, T = 4, 50
+        >>> step = {"observation": torch.rand(n, T, 25), "achieved_goal": torch.rand(n, T, 3),
+        ...         "desired_goal": torch.rand(n, T, 3), "touch": torch.rand(n, T, 2)}
+        >>> episodes = TensorDict({**step, "action": torch.rand(n, T, 4),
+        ...     "next": {**step, "reward": torch.zeros(n, T, 1)}}, [n, T])
+        >>> rb = make_replay_buffer(CEBPSampler("push"), reward_fn=reward, capacity=100 * T, batch_size=32)
+        >>> _ = rb.extend(episodes)
+        >>> batch = rb.sample()
+        >>> batch["index"].shape, batch["priority_weight"].shape
+        (torch.Size([32, 2]), torch.Size([32]))
+    """
+    sampler = UniformEpisodeSampler() if sampler is None else sampler
+    if isinstance(sampler, PERSampler) and sampler.max_size != capacity:
+        raise ValueError(
+            f"PERSampler capacity ({sampler.max_size}) must equal the buffer capacity ({capacity})"
+        )
+    return TensorDictReplayBuffer(
+        storage=episode_storage(capacity, kind=storage, scratch_dir=scratch_dir, device=device),
+        sampler=sampler,
+        sample_unit=HindsightRelabel(reward_fn, future_p=future_p, strategy=strategy),
+        batch_size=batch_size,
+        dim_extend=0,
+        priority_key="td_error",
+    )

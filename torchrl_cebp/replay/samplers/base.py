@@ -1,0 +1,273 @@
+"""Episode-level prioritised sampling over a ``[episode, t]`` TorchRL storage.
+
+Every sampler here draws an *episode row* with probability proportional to a
+priority computed once, when the episode is written, and then a step inside
+it. Priorities live in a sum segment tree (TorchRL's C++ one), so a draw costs
+O(batch x log episodes) and never rescans the buffer.
+"""
+from __future__ import annotations
+
+import abc
+import json
+from pathlib import Path
+from typing import Any
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
+from torchrl._torchrl import SumSegmentTreeFp64
+from torchrl.data.replay_buffers.samplers import Sampler
+from torchrl.data.replay_buffers.storages import Storage
+
+FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
+
+
+def require_key(
+    episodes: TensorDictBase, key: NestedKey, trailing_shape: tuple[int | None, ...]
+) -> torch.Tensor:
+    """Returns ``episodes[key]`` after checking it is there with shape ``[n, T, *trailing_shape]``.
+
+    ``None`` in ``trailing_shape`` accepts any size in that dimension.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> td = TensorDict({"next": {"touch": torch.zeros(2, 50, 2)}}, [2, 50])
+        >>> require_key(td, ("next", "touch"), (2,)).shape
+        torch.Size([2, 50, 2])
+    """
+    expected = "[n_episodes, T, " + ", ".join("*" if d is None else str(d) for d in trailing_shape) + "]"
+    value = episodes.get(key, None)
+    if value is None:
+        raise KeyError(
+            f"episode data has no key {key!r} (expected shape {expected}); "
+            f"present keys: {sorted(map(str, episodes.keys(True, True)))}"
+        )
+    if value.ndim != 2 + len(trailing_shape) or any(
+        want is not None and got != want for got, want in zip(value.shape[2:], trailing_shape)
+    ):
+        raise ValueError(
+            f"key {key!r} has shape {list(value.shape)}, expected {expected}"
+        )
+    return value
+
+
+def episode_positions(
+    episodes: TensorDictBase, position_key: NestedKey, next_position_key: NestedKey
+) -> torch.Tensor:
+    """Stacks the state before step 0 with every next-state: ``[n, T + 1, 3]``.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> td = TensorDict({"achieved_goal": torch.zeros(1, 4, 3),
+        ...                  "next": {"achieved_goal": torch.ones(1, 4, 3)}}, [1, 4])
+        >>> episode_positions(td, "achieved_goal", ("next", "achieved_goal")).shape
+        torch.Size([1, 5, 3])
+    """
+    first = require_key(episodes, position_key, (3,))[:, :1]
+    following = require_key(episodes, next_position_key, (3,))
+    return torch.cat([first, following], dim=1).double()
+
+
+def stored_rows(index: torch.Tensor) -> torch.Tensor:
+    """Episode rows touched by a write, from the ``[n * T, 2]`` index a buffer reports."""
+    index = torch.as_tensor(index)
+    rows = index[..., 0] if index.ndim > 1 else index
+    return torch.unique(rows.reshape(-1))
+
+
+def split_index(index: torch.Tensor | tuple) -> tuple[torch.Tensor, torch.Tensor]:
+    """Returns ``(rows, steps)`` from a ``(rows, steps)`` tuple or a ``[B, 2]`` tensor."""
+    if isinstance(index, tuple):
+        return index[0], index[1]
+    return index[..., 0], index[..., 1]
+
+
+class EpisodePrioritySampler(Sampler, abc.ABC):
+    """Base class: draws episode rows by a per-episode priority, then a step.
+
+    Subclasses implement :meth:`episode_priority`, mapping the ``[n, T]``
+    tensordict of freshly written episodes to ``n`` non-negative priorities,
+    and may override :meth:`step_weights` (non-uniform steps) and
+    :meth:`importance_weights`. Works with a stock
+    :class:`~torchrl.data.TensorDictReplayBuffer` over
+    ``LazyTensorStorage(capacity_in_transitions, ndim=2)``: the buffer's
+    writer notifies the sampler through :meth:`mark_update` after each write,
+    which is when the priority of each written episode is computed.
+
+    Args:
+        generator (torch.Generator, optional): random source of the draws;
+            the global torch RNG when omitted.
+    """
+
+    def __init__(self, generator: torch.Generator | None = None) -> None:
+        self._rng = generator
+        self._priorities = torch.zeros(0, dtype=torch.float64)
+        self._cumulative_step_weights: torch.Tensor | None = None
+        self._tree: SumSegmentTreeFp64 | None = None
+        self._n_stored = 0
+
+    # ---- what subclasses define -------------------------------------------------
+    @abc.abstractmethod
+    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
+        """Priority of each episode of a ``[n, T]`` tensordict (shape ``[n]``, >= 0)."""
+
+    def step_weights(self, episodes: TensorDictBase) -> torch.Tensor | None:
+        """Per-step sampling weights ``[n, T]``, or ``None`` for uniform steps."""
+        return None
+
+    def importance_weights(
+        self, probabilities: torch.Tensor, n_episodes: int
+    ) -> torch.Tensor | None:
+        """IS weights of the drawn episodes, or ``None`` when the method uses none."""
+        return None
+
+    # ---- TorchRL sampler interface ----------------------------------------------
+    @property
+    def n_episodes(self) -> int:
+        """Number of episode rows written so far (at most the storage's rows)."""
+        return self._n_stored
+
+    def _ensure_capacity(self, storage: Storage, episode_length: int) -> None:
+        n_rows = storage._max_size_along_dim0()
+        if self._tree is None or self._tree.size != n_rows:
+            self._tree = SumSegmentTreeFp64(n_rows)
+            old = self._priorities
+            self._priorities = torch.zeros(n_rows, dtype=torch.float64)
+            self._priorities[: old.numel()] = old[:n_rows]
+            if old.numel():
+                self._tree[torch.arange(n_rows)] = self._priorities
+        if self._cumulative_step_weights is not None and (
+            self._cumulative_step_weights.shape != (n_rows, episode_length)
+        ):
+            self._cumulative_step_weights = None
+
+    def mark_update(
+        self, index: torch.Tensor | int, *, storage: Storage | None = None
+    ) -> None:
+        if storage is None:
+            raise RuntimeError(
+                f"{type(self).__name__} computes priorities from the written episodes and "
+                "needs the storage: use it inside a replay buffer whose writer notifies it."
+            )
+        if getattr(storage, "ndim", 1) != 2:
+            raise ValueError(
+                f"{type(self).__name__} needs an episode storage with ndim=2 "
+                f"(rows = episodes, columns = steps), got ndim={getattr(storage, 'ndim', 1)}"
+            )
+        rows = stored_rows(index)
+        episodes = storage[rows]
+        self._ensure_capacity(storage, episodes.shape[1])
+        self.write_priorities(rows, episodes)
+
+    def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase) -> None:
+        """Computes and stores the priorities of ``episodes`` written at ``rows``."""
+        priority = self.episode_priority(episodes).to(torch.float64)
+        if priority.shape != rows.shape or not torch.isfinite(priority).all() or (priority < 0).any():
+            raise ValueError(
+                f"{type(self).__name__}.episode_priority must give {rows.numel()} finite "
+                f"non-negative priorities, got {priority}"
+            )
+        self.set_priorities(rows, priority)
+        steps = self.step_weights(episodes)
+        if steps is not None:
+            if self._cumulative_step_weights is None:
+                self._cumulative_step_weights = torch.zeros(
+                    self._priorities.numel(), episodes.shape[1], dtype=torch.float64
+                )
+            self._cumulative_step_weights[rows] = steps.double().cumsum(-1)
+        self._n_stored = max(self._n_stored, int(rows.max()) + 1)
+
+    def set_priorities(self, rows: torch.Tensor, priority: torch.Tensor) -> None:
+        """Overwrites the priorities of ``rows`` (used on write, and by samplers that re-rank)."""
+        self._priorities[rows] = priority
+        self._tree[rows] = priority
+
+    def extend(self, index: torch.Tensor) -> None:
+        # Priorities are set in mark_update, which the writer calls with the storage.
+        return
+
+    def add(self, index: int) -> None:
+        return
+
+    def _uniform(self, *shape: int) -> torch.Tensor:
+        return torch.rand(*shape, generator=self._rng, dtype=torch.float64)
+
+    def draw_episodes(self, batch_size: int) -> torch.Tensor:
+        """Episode rows drawn proportionally to their priority (O(batch x log rows))."""
+        total = self._tree.query(0, self._tree.size)
+        if not total > 0:
+            raise RuntimeError(
+                f"{type(self).__name__}: every stored episode has priority 0, nothing to draw"
+            )
+        mass = self._uniform(batch_size) * total
+        rows = self._tree.scan_lower_bound(mass)
+        # Float round-off at the very top of the range can land past the last stored row.
+        return rows.clamp_(max=self._n_stored - 1)
+
+    def draw_steps(self, rows: torch.Tensor, episode_length: int) -> torch.Tensor:
+        """A step per drawn row: uniform, or by the cumulative step weights."""
+        if self._cumulative_step_weights is None:
+            return torch.randint(
+                episode_length, rows.shape, generator=self._rng, dtype=torch.long
+            )
+        cumulative = self._cumulative_step_weights[rows]
+        mass = self._uniform(rows.numel(), 1) * cumulative[:, -1:]
+        steps = torch.searchsorted(cumulative, mass, right=True).squeeze(-1)
+        return steps.clamp_(max=episode_length - 1)
+
+    def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
+        """Probability of drawing each of ``rows`` under the current priorities."""
+        return self._priorities[rows] / self._tree.query(0, self._tree.size)
+
+    def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
+        if self._n_stored == 0:
+            raise RuntimeError(f"{type(self).__name__}: cannot sample from an empty buffer")
+        episode_length = storage.shape[1]
+        rows = self.draw_episodes(batch_size)
+        steps = self.draw_steps(rows, episode_length)
+        info: dict[str, Any] = {}
+        weights = self.importance_weights(self.probabilities(rows), self._n_stored)
+        if weights is not None:
+            info["priority_weight"] = weights.to(torch.float32)
+        return (rows, steps), info
+
+    # ---- state --------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        state = {"priorities": self._priorities.clone(), "n_stored": self._n_stored}
+        if self._cumulative_step_weights is not None:
+            state["cumulative_step_weights"] = self._cumulative_step_weights.clone()
+        return state
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        self._priorities = state_dict["priorities"].clone().to(torch.float64)
+        self._n_stored = int(state_dict["n_stored"])
+        steps = state_dict.get("cumulative_step_weights")
+        self._cumulative_step_weights = None if steps is None else steps.clone()
+        self._tree = SumSegmentTreeFp64(self._priorities.numel())
+        if self._priorities.numel():
+            self._tree[torch.arange(self._priorities.numel())] = self._priorities
+
+    def _empty(self) -> None:
+        self._priorities.zero_()
+        if self._tree is not None:
+            self._tree = SumSegmentTreeFp64(self._priorities.numel())
+        self._cumulative_step_weights = None
+        self._n_stored = 0
+
+    def dumps(self, path: str | Path) -> None:
+        path = Path(path)
+        path.mkdir(parents=True, exist_ok=True)
+        state = self.state_dict()
+        tensors = {k: v for k, v in state.items() if isinstance(v, torch.Tensor)}
+        torch.save(tensors, path / "sampler_tensors.pt")
+        others = {k: v for k, v in state.items() if not isinstance(v, torch.Tensor)}
+        (path / "sampler_metadata.json").write_text(json.dumps(others))
+
+    def loads(self, path: str | Path) -> None:
+        path = Path(path)
+        state = torch.load(path / "sampler_tensors.pt", weights_only=True)
+        state.update(json.loads((path / "sampler_metadata.json").read_text()))
+        self.load_state_dict(state)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(n_episodes={self._n_stored})"

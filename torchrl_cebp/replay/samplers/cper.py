@@ -1,0 +1,57 @@
+"""Contact Prioritized Experience Replay (CPER, Vulin et al. 2021)."""
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
+
+from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, require_key
+
+
+class CPERSampler(EpisodePrioritySampler):
+    """Steps after the episode's cumulative touch passes a threshold weigh ``lam``, others 1.
+
+    An episode is drawn proportionally to the sum of its step weights, and the
+    step inside it by the same weights. No importance-sampling weights.
+
+    Args:
+        threshold: cumulative touch (left + right) above which a step counts as contact-rich.
+        lam: weight of a contact-rich step (``lambda`` in the paper).
+        touch_key: where the per-step touch ``[T, 2]`` lives.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+        >>> from torchrl_cebp.samplers import CPERSampler
+        >>> episodes = TensorDict({"next": {"touch": torch.rand(3, 50, 2)}}, [3, 50])
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
+        ...                             sampler=CPERSampler(), batch_size=4, dim_extend=0)
+        >>> _ = rb.extend(episodes)
+        >>> rb.sample().shape
+        torch.Size([4])
+    """
+
+    def __init__(
+        self,
+        threshold: float = 1.0,
+        lam: float = 10.0,
+        *,
+        touch_key: NestedKey = ("next", "touch"),
+        generator: torch.Generator | None = None,
+    ) -> None:
+        super().__init__(generator)
+        self.threshold = float(threshold)
+        self.lam = float(lam)
+        self.touch_key = touch_key
+
+    def step_weights(self, episodes: TensorDictBase) -> torch.Tensor:
+        touch = require_key(episodes, self.touch_key, (2,)).double().sum(-1)
+        rich = torch.cumsum(touch, dim=1) > self.threshold
+        return torch.where(rich, self.lam, 1.0)
+
+    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
+        return self.step_weights(episodes).sum(1)
+
+    def __repr__(self) -> str:
+        return f"CPERSampler(threshold={self.threshold}, lam={self.lam}, n_episodes={self.n_episodes})"

@@ -1,0 +1,79 @@
+"""Energy-Based hindsight experience Prioritization (EBP, Zhao & Tresp 2018)."""
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
+
+from torchrl_cebp.replay.samplers.base import FLOAT32_EPS, EpisodePrioritySampler, episode_positions
+
+GRAVITY = 9.81
+MASS = 1.0
+STEP_SECONDS = 0.04  # 20 substeps of 2 ms: the Fetch control step
+
+
+class EBPSampler(EpisodePrioritySampler):
+    """Episodes drawn by the object's trajectory energy (potential + kinetic increases).
+
+    Per step ``E(t) = w_p g m (z_t - z_0) + w_k m ||v_t||^2 / 2``; the
+    trajectory energy is ``sum_t clip(E(t) - E(t-1), 0, clip_energy)`` (with
+    ``E(t) - E(t-1) := E(1)`` at the first step), and ``p(e)`` is proportional
+    to ``energy^(1 / (temperature + 0.01))``. No importance-sampling weights.
+
+    Args:
+        clip_energy: per-step clip (0.5 for PickAndPlace in the paper, 999 otherwise).
+        temperature: 1 by default.
+        w_potential, w_kinetic: weights of the two energy terms.
+        position_key, next_position_key: object position before / after each step.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+        >>> from torchrl_cebp.samplers import EBPSampler
+        >>> episodes = TensorDict({"achieved_goal": torch.rand(3, 50, 3),
+        ...                        "next": {"achieved_goal": torch.rand(3, 50, 3)}}, [3, 50])
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
+        ...                             sampler=EBPSampler(clip_energy=0.5), batch_size=4, dim_extend=0)
+        >>> _ = rb.extend(episodes)
+        >>> rb.sample().shape
+        torch.Size([4])
+    """
+
+    def __init__(
+        self,
+        clip_energy: float = 999.0,
+        temperature: float = 1.0,
+        *,
+        w_potential: float = 1.0,
+        w_kinetic: float = 1.0,
+        position_key: NestedKey = "achieved_goal",
+        next_position_key: NestedKey = ("next", "achieved_goal"),
+        generator: torch.Generator | None = None,
+    ) -> None:
+        super().__init__(generator)
+        self.clip_energy = float(clip_energy)
+        self.temperature = float(temperature)
+        self.w_potential = float(w_potential)
+        self.w_kinetic = float(w_kinetic)
+        self.position_key = position_key
+        self.next_position_key = next_position_key
+
+    def trajectory_energy(self, episodes: TensorDictBase) -> torch.Tensor:
+        """The clipped, summed energy increases of each episode's object (shape ``[n]``)."""
+        positions = episode_positions(episodes, self.position_key, self.next_position_key)
+        height = positions[:, 1:, 2] - positions[:, :1, 2]
+        velocity = (positions[:, 1:] - positions[:, :-1]) / STEP_SECONDS
+        energy = self.w_potential * GRAVITY * MASS * height + self.w_kinetic * 0.5 * MASS * velocity.pow(2).sum(-1)
+        increase = torch.cat([energy[:, :1], energy.diff(dim=1)], dim=1)
+        return increase.clamp(0.0, self.clip_energy).sum(1)
+
+    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
+        # eps keeps a buffer of motionless episodes drawable (uniformly) instead of all-zero.
+        return self.trajectory_energy(episodes).pow(1.0 / (self.temperature + 0.01)) + FLOAT32_EPS
+
+    def __repr__(self) -> str:
+        return (
+            f"EBPSampler(clip_energy={self.clip_energy}, temperature={self.temperature}, "
+            f"n_episodes={self.n_episodes})"
+        )

@@ -1,0 +1,139 @@
+"""Maximum Entropy-regularized multi-goal Prioritization (MEP, Zhao et al. 2019)."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from sklearn.mixture import BayesianGaussianMixture
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
+from torchrl.data.replay_buffers.storages import Storage
+
+from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, episode_positions
+
+
+class MEPSampler(EpisodePrioritySampler):
+    """Rare achieved-goal trajectories first: rank of the -log density under a Bayesian GMM.
+
+    A :class:`sklearn.mixture.BayesianGaussianMixture` (Dirichlet-distribution
+    prior) is fitted on the flattened achieved-goal trajectories of the buffer
+    by :meth:`refit`, which the trainer calls on a schedule (once per epoch in
+    the paper). Each episode's score is ``-log density``; ``p(e)`` is
+    proportional to ``dense_rank(score) ^ (1 / (temperature + 0.01))``.
+    Episodes written between refits are scored by the current mixture and
+    ranked against the scores of the last refit (O(log N) each), so a write
+    never rescans the buffer. Before the first refit every episode has rank 1.
+    No importance-sampling weights.
+
+    Args:
+        n_components: mixture components (3 in MEP).
+        temperature: rank exponent is ``1 / (temperature + 0.01)``.
+        max_fit_episodes: fit on at most this many stored episodes drawn at
+            random (all are scored); bounds the refit cost on large buffers.
+        max_iter: EM iterations per refit.
+        seed: seeds the mixture's initialisation and the fit subsample.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+        >>> from torchrl_cebp.samplers import MEPSampler
+        >>> episodes = TensorDict({"achieved_goal": torch.rand(20, 50, 3),
+        ...                        "next": {"achieved_goal": torch.rand(20, 50, 3)}}, [20, 50])
+        >>> sampler = MEPSampler()
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * 50, ndim=2),
+        ...                             sampler=sampler, batch_size=4, dim_extend=0)
+        >>> _ = rb.extend(episodes)
+        >>> sampler.refit(rb.storage)
+        >>> rb.sample().shape
+        torch.Size([4])
+    """
+
+    def __init__(
+        self,
+        n_components: int = 3,
+        temperature: float = 1.0,
+        *,
+        max_fit_episodes: int = 5000,
+        max_iter: int = 100,
+        seed: int = 0,
+        position_key: NestedKey = "achieved_goal",
+        next_position_key: NestedKey = ("next", "achieved_goal"),
+        generator: torch.Generator | None = None,
+    ) -> None:
+        super().__init__(generator)
+        self.n_components = int(n_components)
+        self.temperature = float(temperature)
+        self.max_fit_episodes = int(max_fit_episodes)
+        self.max_iter = int(max_iter)
+        self.seed = int(seed)
+        self.position_key = position_key
+        self.next_position_key = next_position_key
+        self._mixture: BayesianGaussianMixture | None = None
+        self._reference_scores = torch.zeros(0, dtype=torch.float64)
+        self._n_refits = 0
+
+    def _new_mixture(self) -> BayesianGaussianMixture:
+        return BayesianGaussianMixture(
+            n_components=self.n_components,
+            weight_concentration_prior_type="dirichlet_distribution",
+            max_iter=self.max_iter,
+            random_state=self.seed + self._n_refits,
+        )
+
+    def _trajectories(self, episodes: TensorDictBase) -> np.ndarray:
+        positions = episode_positions(episodes, self.position_key, self.next_position_key)
+        return positions.flatten(1).numpy()
+
+    def _scores(self, trajectories: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(-self._mixture.score_samples(trajectories))
+
+    def _priority_from_rank(self, rank: torch.Tensor) -> torch.Tensor:
+        return rank.double().pow(1.0 / (self.temperature + 0.01))
+
+    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
+        if self._mixture is None:
+            return torch.ones(episodes.shape[0], dtype=torch.float64)
+        scores = self._scores(self._trajectories(episodes))
+        rank = torch.searchsorted(self._reference_scores, scores) + 1
+        return self._priority_from_rank(rank)
+
+    def refit(self, storage: Storage) -> None:
+        """Fits the mixture on the stored trajectories and re-ranks every stored episode."""
+        if self.n_episodes < self.n_components:
+            return
+        rows = torch.arange(self.n_episodes)
+        trajectories = self._trajectories(storage[rows])
+        fit_rows = np.random.default_rng(self.seed + self._n_refits).permutation(len(rows))
+        self._mixture = self._new_mixture().fit(trajectories[fit_rows[: self.max_fit_episodes]])
+        self._n_refits += 1
+        unique_scores, rank = torch.unique(self._scores(trajectories), return_inverse=True)
+        self._reference_scores = unique_scores
+        self.set_priorities(rows, self._priority_from_rank(rank + 1))
+
+    def state_dict(self) -> dict[str, Any]:
+        state = super().state_dict()
+        state["reference_scores"] = self._reference_scores.clone()
+        state["n_refits"] = self._n_refits
+        if self._mixture is not None:
+            for i, array in enumerate(self._mixture._get_parameters()):
+                state[f"mixture_{i}"] = torch.as_tensor(np.asarray(array))
+        return state
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        super().load_state_dict(state_dict)
+        self._reference_scores = state_dict["reference_scores"].clone()
+        self._n_refits = int(state_dict["n_refits"])
+        parameters = [state_dict[key].numpy() for key in sorted(k for k in state_dict if k.startswith("mixture_"))]
+        self._mixture = None
+        if parameters:
+            self._mixture = self._new_mixture()
+            self._mixture._set_parameters(tuple(parameters))
+            self._mixture.n_features_in_ = parameters[2].shape[1]
+
+    def __repr__(self) -> str:
+        return (
+            f"MEPSampler(n_components={self.n_components}, temperature={self.temperature}, "
+            f"refits={self._n_refits}, n_episodes={self.n_episodes})"
+        )
