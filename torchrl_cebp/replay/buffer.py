@@ -4,11 +4,12 @@ from __future__ import annotations
 from typing import Literal
 
 import torch
-from torchrl.data import LazyMemmapStorage, LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.data import TensorDictReplayBuffer
 from torchrl.data.replay_buffers.samplers import Sampler
 
 from torchrl_cebp.replay.her import HindsightRelabel, RewardFn
 from torchrl_cebp.replay.samplers import PERSampler, UniformEpisodeSampler
+from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage
 
 
 def episode_storage(
@@ -17,21 +18,20 @@ def episode_storage(
     kind: Literal["tensor", "memmap"] = "tensor",
     scratch_dir: str | None = None,
     device: torch.device | str = "cpu",
-) -> LazyTensorStorage:
-    """A TorchRL storage holding whole episodes as rows, ``capacity`` counted in transitions.
+) -> EpisodeStorage | EpisodeMemmapStorage:
+    """An episode storage by name: ``"tensor"`` (in memory) or ``"memmap"`` (on disk).
 
-    With 50-step episodes the default 1e6 transitions is 20,000 episode rows;
-    the buffer's round-robin writer overwrites the oldest episode first.
+    ``capacity`` is counted in transitions: with 50-step episodes the default
+    1e6 is 20,000 episode rows.
 
     Examples:
-        >>> storage = episode_storage(1000)
-        >>> storage.ndim
+        >>> episode_storage(1000).ndim
         2
     """
     if kind == "tensor":
-        return LazyTensorStorage(int(capacity), ndim=2, device=device)
+        return EpisodeStorage(capacity, device=device)
     if kind == "memmap":
-        return LazyMemmapStorage(int(capacity), ndim=2, scratch_dir=scratch_dir, device=device)
+        return EpisodeMemmapStorage(capacity, scratch_dir=scratch_dir, device=device)
     raise ValueError(f"unknown storage kind {kind!r}; valid kinds: ['memmap', 'tensor']")
 
 

@@ -32,6 +32,11 @@ class MEPSampler(EpisodePrioritySampler):
         max_fit_episodes: fit on at most this many stored episodes drawn at
             random (all are scored); bounds the refit cost on large buffers.
         max_iter: EM iterations per refit.
+        reg_covar: added to the covariances' diagonal and to the Wishart prior's
+            (the data's covariance). Early buffers hold many identical
+            trajectories (the object never moved), whose singular covariance
+            breaks sklearn's default prior; 1e-4 is a 1 cm standard deviation
+            on positions in metres.
         seed: seeds the mixture's initialisation and the fit subsample.
 
     Examples:
@@ -57,6 +62,7 @@ class MEPSampler(EpisodePrioritySampler):
         *,
         max_fit_episodes: int = 5000,
         max_iter: int = 100,
+        reg_covar: float = 1e-4,
         seed: int = 0,
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
@@ -67,6 +73,7 @@ class MEPSampler(EpisodePrioritySampler):
         self.temperature = float(temperature)
         self.max_fit_episodes = int(max_fit_episodes)
         self.max_iter = int(max_iter)
+        self.reg_covar = float(reg_covar)
         self.seed = int(seed)
         self.position_key = position_key
         self.next_position_key = next_position_key
@@ -74,11 +81,13 @@ class MEPSampler(EpisodePrioritySampler):
         self._reference_scores = torch.zeros(0, dtype=torch.float64)
         self._n_refits = 0
 
-    def _new_mixture(self) -> BayesianGaussianMixture:
+    def _new_mixture(self, covariance_prior: np.ndarray | None = None) -> BayesianGaussianMixture:
         return BayesianGaussianMixture(
+            covariance_prior=covariance_prior,
             n_components=self.n_components,
             weight_concentration_prior_type="dirichlet_distribution",
             max_iter=self.max_iter,
+            reg_covar=self.reg_covar,
             random_state=self.seed + self._n_refits,
         )
 
@@ -106,7 +115,9 @@ class MEPSampler(EpisodePrioritySampler):
         rows = torch.arange(self.n_episodes)
         trajectories = self._trajectories(storage[rows])
         fit_rows = np.random.default_rng(self.seed + self._n_refits).permutation(len(rows))
-        self._mixture = self._new_mixture().fit(trajectories[fit_rows[: self.max_fit_episodes]])
+        fit_data = trajectories[fit_rows[: self.max_fit_episodes]]
+        prior = np.cov(fit_data.T) + self.reg_covar * np.eye(fit_data.shape[1])
+        self._mixture = self._new_mixture(prior).fit(fit_data)
         self._n_refits += 1
         unique_scores, rank = torch.unique(self._scores(trajectories), return_inverse=True)
         self._reference_scores = unique_scores

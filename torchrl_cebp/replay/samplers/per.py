@@ -1,6 +1,8 @@
 """Prioritized Experience Replay (PER, Schaul et al. 2016) over episode rows."""
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -71,6 +73,14 @@ class PERSampler(PrioritizedSampler):
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         super().load_state_dict(state_dict)
         self.draws = int(state_dict.get("draws", 0))
+
+    def dumps(self, path: str | Path) -> None:
+        super().dumps(path)
+        (Path(path) / "per_draws.json").write_text(json.dumps({"draws": self.draws}))
+
+    def loads(self, path: str | Path) -> None:
+        super().loads(path)
+        self.draws = json.loads((Path(path) / "per_draws.json").read_text())["draws"]
 
     def __repr__(self) -> str:
         return (

@@ -1,0 +1,126 @@
+"""Episode storage and buffer: wrap-around, checkpoints, and errors that name the key."""
+import numpy as np
+import pytest
+import torch
+
+from tests.replay.conftest import T, make_episodes, sparse_reward
+from tests.replay.test_her import decode, labelled_episodes
+from torchrl_cebp.replay import make_replay_buffer
+from torchrl_cebp.samplers import CEBPSampler, CPERSampler, EBPSampler, MEPSampler, PERSampler, UniformEpisodeSampler
+
+SAMPLERS = {  # each built for a buffer of the given capacity
+    "uniform": lambda capacity: UniformEpisodeSampler(),
+    "cebp": lambda capacity: CEBPSampler("push"),
+    "cebp_released": lambda capacity: CEBPSampler("push", form="released"),
+    "cper": lambda capacity: CPERSampler(),
+    "ebp": lambda capacity: EBPSampler(),
+    "mep": lambda capacity: MEPSampler(),
+    "per": PERSampler,
+}
+
+
+@pytest.mark.parametrize("name", sorted(SAMPLERS))
+def test_wrap_around_keeps_episodes_whole_and_priorities_fresh(name):
+    sampler = SAMPLERS[name](5 * T)
+    rb = make_replay_buffer(sampler, reward_fn=sparse_reward, capacity=5 * T, batch_size=4096, future_p=1.0)
+    for first in range(0, 8, 2):  # 8 episodes into 5 rows, two at a time
+        rb.extend(labelled_episodes(2, first_id=first))
+    stored_ids = rb.storage[torch.arange(5)]["achieved_goal"][..., 0]
+    assert torch.equal(stored_ids, torch.tensor([5.0, 6, 7, 3, 4])[:, None].expand(5, T))
+    if isinstance(sampler, MEPSampler):
+        sampler.refit(rb.storage)
+    batch = rb.sample()
+    episode, state = decode(batch["desired_goal"])
+    assert set(episode.tolist()) <= {3, 4, 5, 6, 7}
+    assert torch.equal(episode, decode(batch["achieved_goal"])[0])
+    assert (state > batch["index"][:, 1]).all()
+    if hasattr(sampler, "probabilities"):
+        fresh = make_replay_buffer(SAMPLERS[name](5 * T), reward_fn=sparse_reward, capacity=5 * T)
+        fresh.extend(rb.storage[torch.arange(5)])
+        if isinstance(sampler, MEPSampler):
+            fresh.sampler.refit(fresh.storage)
+        rows = torch.arange(5)
+        torch.testing.assert_close(sampler.probabilities(rows), fresh.sampler.probabilities(rows))
+
+
+@pytest.mark.parametrize("name", sorted(SAMPLERS))
+def test_save_load_then_draw_gives_the_same_batches(name, tmp_path):
+    def filled():
+        rb = make_replay_buffer(SAMPLERS[name](20 * T), reward_fn=sparse_reward, capacity=20 * T, batch_size=64)
+        rb.extend(make_episodes(12, seed=3))
+        if isinstance(rb.sampler, MEPSampler):
+            rb.sampler.refit(rb.storage)
+        return rb
+
+    def draws(rb):
+        torch.manual_seed(11)
+        np.random.seed(11)
+        return [rb.sample() for _ in range(3)]
+
+    original = filled()
+    original.dumps(tmp_path)
+    expected = draws(original)
+    restored = make_replay_buffer(SAMPLERS[name](20 * T), reward_fn=sparse_reward, capacity=20 * T, batch_size=64)
+    restored.loads(tmp_path)
+    got = draws(restored)
+    for a, b in zip(expected, got):
+        assert torch.equal(a["index"], b["index"])
+        assert torch.equal(a["desired_goal"], b["desired_goal"])
+        assert (a == b).all()
+    restored.extend(make_episodes(2, seed=9))  # the restored buffer keeps writing where it stopped
+    assert len(restored) == 14 * T
+
+
+def test_sampler_state_dict_round_trip_without_pickled_code(tmp_path):
+    rb = make_replay_buffer(CEBPSampler("push"), reward_fn=sparse_reward, capacity=20 * T)
+    rb.extend(make_episodes(5))
+    torch.save(rb.sampler.state_dict(), tmp_path / "s.pt")
+    sampler = CEBPSampler("push")
+    sampler.load_state_dict(torch.load(tmp_path / "s.pt", weights_only=True))
+    torch.testing.assert_close(sampler.probabilities(torch.arange(5)), rb.sampler.probabilities(torch.arange(5)))
+
+
+@pytest.mark.parametrize(
+    "sampler, key, shape",
+    [
+        (lambda: CEBPSampler("push"), ("next", "touch"), "[n_episodes, T, 2]"),
+        (lambda: CEBPSampler("push", form="released"), ("next", "observation"), "[n_episodes, T, *]"),
+        (CPERSampler, ("next", "touch"), "[n_episodes, T, 2]"),
+        (EBPSampler, ("next", "achieved_goal"), "[n_episodes, T, 3]"),
+    ],
+)
+def test_missing_key_is_named_with_its_expected_shape(sampler, key, shape):
+    data = make_episodes(2)
+    del data[key]
+    rb = make_replay_buffer(sampler(), reward_fn=sparse_reward, capacity=10 * T)
+    with pytest.raises(KeyError) as error:
+        rb.extend(data)
+    message = error.value.args[0]
+    assert str(key) in message and shape in message
+
+
+def test_misshaped_key_is_named_with_its_expected_shape():
+    data = make_episodes(2)
+    data["next", "touch"] = torch.zeros(2, T, 3)
+    rb = make_replay_buffer(CEBPSampler("push"), reward_fn=sparse_reward, capacity=10 * T)
+    with pytest.raises(ValueError, match=r"\('next', 'touch'\).*\[2, 50, 3\].*\[n_episodes, T, 2\]"):
+        rb.extend(data)
+
+
+def test_episodes_of_another_length_are_refused():
+    rb = make_replay_buffer(reward_fn=sparse_reward, capacity=10 * T)
+    rb.extend(make_episodes(2))
+    with pytest.raises(ValueError, match="70 steps.*50-step"):
+        rb.extend(make_episodes(1, length=70))
+
+
+def test_bad_storage_kind_lists_the_valid_ones():
+    with pytest.raises(ValueError, match="'ssd'.*memmap.*tensor"):
+        make_replay_buffer(reward_fn=sparse_reward, storage="ssd")
+
+
+def test_memmap_storage(tmp_path):
+    rb = make_replay_buffer(CEBPSampler("push"), reward_fn=sparse_reward, capacity=10 * T, storage="memmap",
+                            scratch_dir=str(tmp_path), batch_size=32)
+    rb.extend(make_episodes(3))
+    assert rb.sample()["priority_weight"].shape == (32,)

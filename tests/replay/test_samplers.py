@@ -1,0 +1,193 @@
+"""Each sampler's episode frequencies and weights against the formulas, computed by hand."""
+import numpy as np
+import pytest
+import torch
+from scipy.stats import chisquare, rankdata
+from torchrl.data import TensorDictReplayBuffer
+
+from tests.replay.conftest import T, make_episodes
+from torchrl_cebp.replay import EpisodeStorage
+from torchrl_cebp.samplers import (
+    CEBPSampler,
+    CPERSampler,
+    EBPSampler,
+    MEPSampler,
+    PERSampler,
+    UniformEpisodeSampler,
+)
+
+N_EPISODES = 6
+
+
+def hand_made(n=N_EPISODES, seed=0):
+    """Episodes whose touch and object motion differ a lot between episodes."""
+    g = torch.Generator().manual_seed(seed)
+    steps = torch.arange(T + 1, dtype=torch.float32)
+    positions = torch.zeros(n, T + 1, 3)
+    touch = torch.zeros(n, T, 2)
+    for e in range(n):
+        speed = 0.002 * e
+        positions[e, :, 0] = 1.3 + speed * steps
+        positions[e, :, 1] = 0.75
+        positions[e, :, 2] = 0.42 + (0.004 * e * steps.clamp(max=20) if e % 2 else 0.0)
+        touch[e, 10 * (e % 3):, :] = 0.05 * e * torch.rand(T - 10 * (e % 3), 2, generator=g)
+    gripper = positions.clone()
+    gripper[2::3, :, 1] = 0.2  # outside the released workspace box
+    return make_episodes(n, touch=touch, positions=positions, gripper=gripper, seed=seed)
+
+
+def buffer(sampler, n=N_EPISODES):
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(50 * T), sampler=sampler, dim_extend=0, batch_size=4096)
+    data = hand_made(n)
+    rb.extend(data)
+    return rb, data
+
+
+def counts(rb, draws=60):
+    torch.manual_seed(0)
+    np.random.seed(0)
+    rows = torch.cat([rb.sample()["index"][:, 0] for _ in range(draws)])
+    return np.bincount(rows.numpy(), minlength=N_EPISODES)
+
+
+def assert_frequencies(observed, probabilities):
+    probabilities = np.asarray(probabilities, dtype=np.float64)
+    probabilities /= probabilities.sum()
+    expected = probabilities * observed.sum()
+    keep = expected > 0
+    assert observed[~keep].sum() == 0
+    assert chisquare(observed[keep], expected[keep]).pvalue > 1e-3, (observed, expected)
+
+
+def np_paper_cebp(data, k, temperature):
+    touch = data["next", "touch"].double().numpy().sum(-1)
+    pos = np.concatenate([data["achieved_goal"][:, :1].double().numpy(), data["next", "achieved_goal"].double().numpy()], 1)
+    dist = np.linalg.norm(np.diff(pos, axis=1), axis=-1)
+    c = np.cumsum(touch * dist, axis=1)
+    return (k / (1 + np.exp(-temperature * c))).sum(1)
+
+
+def np_released_cebp(data, k, low, high):
+    touch = data["next", "touch"].double().numpy().sum(-1)
+    pos = np.concatenate([data["achieved_goal"][:, :1].double().numpy(), data["next", "achieved_goal"].double().numpy()], 1)
+    disp = np.diff(pos, axis=1)
+    grip = data["next", "observation"][..., :3].double().numpy()
+    mask = np.all((grip >= low) & (grip <= high), -1)
+    energy = np.cumsum(disp * touch[..., None], axis=1) * mask[..., None]
+    x = energy.sum(-1) * np.linalg.norm(disp, axis=-1)
+    s = 100 / (1 + np.exp(-k * x)) - 50
+    return np.abs(s).sum(1) + np.finfo(np.float32).eps
+
+
+def test_uniform_frequencies():
+    rb, _ = buffer(UniformEpisodeSampler())
+    assert_frequencies(counts(rb), np.ones(N_EPISODES))
+
+
+@pytest.mark.parametrize("temperature", [0.01, 5.0, 50.0])
+def test_cebp_paper_frequencies_and_weights(temperature):
+    sampler = CEBPSampler("push", temperature=temperature, beta=0.7)
+    rb, data = buffer(sampler)
+    priority = np_paper_cebp(data, 100.0, temperature)
+    assert_frequencies(counts(rb), priority)
+    batch = rb.sample()
+    p = priority[batch["index"][:, 0].numpy()] / priority.sum()
+    w = (N_EPISODES * p) ** -0.7
+    np.testing.assert_allclose(batch["priority_weight"].numpy(), w / w.max(), rtol=1e-5)
+
+
+def test_cebp_released_frequencies_and_weights():
+    sampler = CEBPSampler("push", form="released")
+    rb, data = buffer(sampler)
+    priority = np_released_cebp(data, 0.1, np.array([1.05, 0.4, 0.4]), np.array([1.55, 1.11, np.inf]))
+    assert len(set(np.round(priority, 6))) > 3  # the hand-made episodes are told apart
+    assert_frequencies(counts(rb), priority)
+    # fewer than 256 stored episodes: the released code uses no IS correction yet
+    assert torch.equal(rb.sample()["priority_weight"], torch.ones(4096))
+
+
+def test_cebp_released_weights_after_warmup():
+    sampler = CEBPSampler("push", form="released")
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(300 * T), sampler=sampler, dim_extend=0, batch_size=512)
+    data = torch.cat([hand_made(6, seed=s) for s in range(50)])
+    rb.extend(data)
+    priority = np_released_cebp(data, 0.1, np.array([1.05, 0.4, 0.4]), np.array([1.55, 1.11, np.inf]))
+    batch = rb.sample()
+    p = priority[batch["index"][:, 0].numpy()]
+    np.testing.assert_allclose(batch["priority_weight"].numpy(), p.min() / p, rtol=1e-5)
+
+
+def test_cper_episode_and_step_frequencies():
+    sampler = CPERSampler(threshold=1.0, lam=10.0)
+    rb, data = buffer(sampler)
+    touch = data["next", "touch"].double().numpy().sum(-1)
+    weights = np.where(np.cumsum(touch, 1) > 1.0, 10.0, 1.0)
+    assert len(set(weights.sum(1))) > 2
+    assert_frequencies(counts(rb), weights.sum(1))
+    torch.manual_seed(1)
+    index = torch.cat([rb.sample()["index"] for _ in range(30)])
+    episode = int(np.argmax(weights.sum(1)))
+    steps = index[index[:, 0] == episode, 1].numpy()
+    observed = np.bincount(steps, minlength=T)
+    assert_frequencies(observed, weights[episode])
+    assert "priority_weight" not in rb.sample().keys()
+
+
+def test_ebp_frequencies():
+    sampler = EBPSampler(clip_energy=0.5, temperature=1.0)
+    rb, data = buffer(sampler)
+    pos = np.concatenate([data["achieved_goal"][:, :1].double().numpy(), data["next", "achieved_goal"].double().numpy()], 1)
+    height = pos[:, 1:, 2] - pos[:, :1, 2]
+    velocity = np.diff(pos, axis=1) / 0.04
+    energy = 9.81 * height + 0.5 * (velocity**2).sum(-1)
+    increase = np.concatenate([energy[:, :1], np.diff(energy, axis=1)], 1)
+    trajectory = np.clip(increase, 0, 0.5).sum(1)
+    assert_frequencies(counts(rb), trajectory ** (1 / 1.01) + np.finfo(np.float32).eps)
+
+
+def test_mep_ranks_rare_trajectories_higher():
+    sampler = MEPSampler(seed=0)
+    rb, data = buffer(sampler)
+    assert_frequencies(counts(rb), np.ones(N_EPISODES))  # before the first refit
+    sampler.refit(rb.storage)
+    pos = np.concatenate([data["achieved_goal"][:, :1].double().numpy(), data["next", "achieved_goal"].double().numpy()], 1)
+    scores = -sampler._mixture.score_samples(pos.reshape(N_EPISODES, -1))
+    assert_frequencies(counts(rb), rankdata(scores, method="dense") ** (1 / 1.01))
+
+
+def test_mep_scores_new_episodes_against_last_refit():
+    sampler = MEPSampler(seed=0)
+    rb, _ = buffer(sampler)
+    sampler.refit(rb.storage)
+    before = sampler._priorities[:N_EPISODES].clone()
+    rb.extend(hand_made(2, seed=7))
+    assert torch.equal(sampler._priorities[:N_EPISODES], before)
+    assert (sampler._priorities[N_EPISODES:N_EPISODES + 2] >= 1).all()
+
+
+def test_per_new_transitions_at_max_priority_then_td_error():
+    sampler = PERSampler(50 * T, beta_anneal_draws=4)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(50 * T), sampler=sampler, dim_extend=0, batch_size=256,
+                                priority_key="td_error")
+    rb.extend(hand_made())
+    batch = rb.sample()
+    assert torch.allclose(batch["priority_weight"], torch.ones(256))
+    # one transition gets a huge TD error: it then dominates the draws
+    batch = batch[:1]
+    batch.set("td_error", torch.tensor([1e6]))
+    rb.update_tensordict_priority(batch)
+    target = batch["index"][0]
+    drawn = rb.sample()["index"]
+    assert (drawn == target).all(-1).float().mean() > 0.9
+    betas = []
+    for _ in range(5):
+        rb.sample()
+        betas.append(sampler.beta)
+    assert betas[0] == pytest.approx(0.4 + 0.6 * 2 / 4) and betas[-1] == pytest.approx(1.0)
+
+
+def test_a_draw_never_returns_unwritten_rows():
+    for sampler in (UniformEpisodeSampler(), CEBPSampler("push"), CPERSampler(), EBPSampler()):
+        rb = TensorDictReplayBuffer(storage=EpisodeStorage(1000 * T), sampler=sampler, dim_extend=0, batch_size=4096)
+        rb.extend(hand_made(3))
+        assert rb.sample()["index"][:, 0].max() <= 2
