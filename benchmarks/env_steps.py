@@ -1,0 +1,119 @@
+"""Env steps per second with random actions: our TorchRL touch-sensing Push vs gymnasium-robotics.
+
+Four rows, one torch thread; the envs take turns in short rounds and each reports its best round,
+so load from other processes on a shared machine skews the ratios less:
+  * plain gymnasium-robotics ``FetchPush-v4`` (``gym.make``, no touch sensing),
+  * our touch-sensing gymnasium env ``TouchFetchPush-v0`` (``gym.make``: the simulation's share),
+  * ``TouchFetchEnv`` (our ``EnvBase`` driving the MuJoCo env directly),
+  * TorchRL ``GymEnv`` + ``DoubleToFloat`` + an info-dict reader on the same touch env
+    (the generic way to get the same keys), for comparison.
+
+Example:
+    $ python benchmarks/env_steps.py --steps 200 --rounds 10
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+
+import gymnasium as gym
+import gymnasium_robotics
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from torchrl.data import Categorical, Unbounded
+from torchrl.envs import DoubleToFloat, EnvBase, GymEnv, TransformedEnv
+from torchrl.envs.gym_like import default_info_dict_reader
+
+from torchrl_cebp.envs import gym_id, make_env
+
+
+def gymnasium_round(env_id: str, seed: int = 0) -> Callable[[int], float]:
+    """A function timing ``steps`` random-action steps (seconds) of a ``gym.make`` env, resetting on episode end.
+
+    Example:
+        >>> gymnasium_round("FetchPush-v4")(20) > 0
+        True
+    """
+    env = gym.make(env_id)
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+
+    def run(steps: int) -> float:
+        actions = rng.uniform(-1, 1, size=(steps, 4)).astype(np.float32)
+        start = time.perf_counter()
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        return time.perf_counter() - start
+
+    return run
+
+
+def torchrl_round(env: EnvBase) -> Callable[[int], float]:
+    """A function timing ``steps`` steps (seconds) of ``env.rollout`` with random actions, auto-resetting.
+
+    Example:
+        >>> torchrl_round(make_env("push", seed=0))(20) > 0
+        True
+    """
+
+    def random_policy(td: TensorDictBase) -> TensorDictBase:
+        return td.set("action", torch.rand(4) * 2 - 1)
+
+    def run(steps: int) -> float:
+        start = time.perf_counter()
+        env.rollout(steps, random_policy, break_when_any_done=False)
+        return time.perf_counter() - start
+
+    return run
+
+
+def gymenv_with_transforms(task: str = "push") -> EnvBase:
+    """The same touch env through TorchRL's generic ``GymEnv`` + transforms.
+
+    Example:
+        >>> "touch" in gymenv_with_transforms().reset().keys()
+        True
+    """
+    env = GymEnv(gym_id(task))
+    reader = default_info_dict_reader(
+        ["is_success", "touch"],
+        spec={"is_success": Categorical(2, (1,), dtype=torch.bool), "touch": Unbounded((2,), dtype=torch.float64)},
+    )
+    env.set_info_dict_reader(reader)
+    return TransformedEnv(env, DoubleToFloat())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=200, help="steps per round")
+    parser.add_argument("--rounds", type=int, default=10)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    gym.register_envs(gymnasium_robotics)
+
+    contenders = {
+        "gymnasium FetchPush-v4 (plain, no touch)": gymnasium_round("FetchPush-v4"),
+        "gymnasium TouchFetchPush-v0 (ours, no torch)": gymnasium_round("TouchFetchPush-v0"),
+        "torchrl_cebp make_env('push') (EnvBase)": torchrl_round(make_env("push", seed=0)),
+        "GymEnv(TouchFetchPush-v0) + DoubleToFloat": torchrl_round(gymenv_with_transforms("push")),
+    }
+    best = {name: float("inf") for name in contenders}
+    for name, run in contenders.items():
+        run(10)  # warm-up
+    for _ in range(args.rounds):
+        for name, run in contenders.items():
+            best[name] = min(best[name], run(args.steps))
+    plain = args.steps / next(iter(best.values()))
+    print(f"{'env':<44} {'steps/s':>9} {'vs plain':>9}")
+    for name, seconds in best.items():
+        rate = args.steps / seconds
+        print(f"{name:<44} {rate:9.0f} {rate / plain:9.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,172 @@
+"""Replay sampling speed of our samplers against the peers, side by side in one run.
+
+For each stored-episode count it reports, per method, the median time to draw a batch of 256 with
+'future' HER relabelling (future_p 0.8), to draw when one episode was written since the last draw
+(what a training loop sees: samplers with caches pay for them here), and to write one 50-step episode.
+
+    .venv/bin/python benchmarks/sampling.py --episodes 2000 20000 --repeats 200
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import itertools
+import statistics
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+
+from _peers import BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, episodes_to_tensordict, make_episodes
+
+# Episodes the write timings cycle through; fresh data, never the stored episodes again.
+POOL_EPISODES = 32
+WARMUP = 10
+
+Builder = Callable[[Episodes, Episodes, int], tuple[Draw, Write]]
+
+
+@dataclass(frozen=True)
+class Timing:
+    draw_ms: float
+    draw_after_write_ms: float
+    write_ms: float
+
+
+def _elapsed_ms(fn: Callable[[], object]) -> float:
+    start = time.perf_counter()
+    fn()
+    return (time.perf_counter() - start) * 1e3
+
+
+def writes_needed(repeats: int) -> int:
+    return WARMUP + 2 * repeats
+
+
+def measure(draw: Draw, write: Write, repeats: int) -> Timing:
+    """Medians over ``repeats``; makes exactly ``writes_needed(repeats)`` writes."""
+    for _ in range(WARMUP):
+        draw()
+        write()
+    draws = [_elapsed_ms(draw) for _ in range(repeats)]
+    after_write = []
+    for _ in range(repeats):
+        write()
+        after_write.append(_elapsed_ms(draw))
+    writes = [_elapsed_ms(write) for _ in range(repeats)]
+    return Timing(statistics.median(draws), statistics.median(after_write), statistics.median(writes))
+
+
+def _our_methods() -> dict[str, Builder]:
+    """Our samplers behind ``make_replay_buffer``; empty (with a note) while the package lacks them."""
+    try:
+        from torchrl_cebp import samplers
+        from torchrl_cebp.replay import make_replay_buffer
+    except ImportError as err:
+        print(f"note: our samplers are skipped, torchrl_cebp is not importable ({err})")
+        return {}
+
+    def reward_fn(ag: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
+        return -(torch.linalg.vector_norm(ag - g, dim=-1, keepdim=True) > 0.05).float()
+
+    # name -> (class, its kwargs given the capacity in transitions); PER's trees are sized by it.
+    factories: dict[str, tuple[str, Callable[[int], dict]]] = {
+        "ours_uniform": ("UniformEpisodeSampler", lambda capacity: {}),
+        # The synthetic episodes are FetchPush-shaped, as is the released_cebp peer.
+        "ours_cebp_paper": ("CEBPSampler", lambda capacity: {"task": "push", "form": "paper"}),
+        "ours_cebp_released": ("CEBPSampler", lambda capacity: {"task": "push", "form": "released"}),
+        "ours_cper": ("CPERSampler", lambda capacity: {}),
+        "ours_ebp": ("EBPSampler", lambda capacity: {}),
+        "ours_mep": ("MEPSampler", lambda capacity: {}),
+        "ours_per": ("PERSampler", lambda capacity: {"capacity": capacity}),
+    }
+
+    def builder(cls_name: str, kwargs: Callable[[int], dict]) -> Builder:
+        def build(stored: Episodes, pool: Episodes, n_writes: int) -> tuple[Draw, Write]:
+            capacity = len(stored) * EPISODE_LENGTH
+            rb = make_replay_buffer(
+                getattr(samplers, cls_name)(**kwargs(capacity)),
+                reward_fn=reward_fn,
+                capacity=capacity,
+                batch_size=BATCH_SIZE,
+                future_p=FUTURE_P,
+                strategy="future",
+            )
+            rb.extend(episodes_to_tensordict(stored))
+            fresh = itertools.cycle([episodes_to_tensordict(pool.slice(i, i + 1)) for i in range(len(pool))])
+
+            def write() -> None:
+                rb.extend(next(fresh))
+
+            return rb.sample, write
+
+        return build
+
+    methods = {}
+    for name, (cls_name, kwargs) in factories.items():
+        if hasattr(samplers, cls_name):
+            methods[name] = builder(cls_name, kwargs)
+        else:
+            print(f"note: {name} is skipped, torchrl_cebp.samplers has no {cls_name}")
+    return methods
+
+
+def _table(title: str, results: dict[str, Timing], field: str) -> str:
+    peers = [p for p in PEERS if p in results]
+    header = f"{'method':<20} {'median ms':>10}" + "".join(f" {'/ ' + p:>16}" for p in peers)
+    lines = [title, header, "-" * len(header)]
+    for name, timing in results.items():
+        value = getattr(timing, field)
+        ratios = "".join(f" {value / getattr(results[p], field):>15.3g}x" for p in peers)
+        lines.append(f"{name:<20} {value:>10.3f}{ratios}")
+    return "\n".join(lines)
+
+
+def run(n_episodes: int, repeats: int, methods: dict[str, Builder]) -> dict[str, Timing]:
+    data = make_episodes(n_episodes + POOL_EPISODES, seed=0)
+    stored, pool = data.slice(0, n_episodes), data.slice(n_episodes, len(data))
+    results = {}
+    for name, build in methods.items():
+        start = time.perf_counter()
+        draw, write = build(stored, pool, writes_needed(repeats))
+        built_s = time.perf_counter() - start
+        results[name] = measure(draw, write, repeats)
+        print(f"  {name}: built in {built_s:.1f} s, {results[name]}", flush=True)
+        # Drop the buffer before the next method so its memory and GC load do not bias the next timing.
+        del draw, write
+        gc.collect()
+    return results
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--episodes", type=int, nargs="+", default=[2000, 20000], help="stored 50-step episodes")
+    parser.add_argument("--repeats", type=int, default=200, help="timed draws (and writes) per median")
+    parser.add_argument("--peers-only", action="store_true", help="skip our samplers")
+    args = parser.parse_args()
+
+    # Shared 2-core machines: more threads only add contention, and the peers' reference runs used 1.
+    torch.set_num_threads(1)
+    methods: dict[str, Builder] = dict(PEERS)
+    if not args.peers_only:
+        methods.update(_our_methods())
+
+    print(f"torch {torch.__version__}, batch {BATCH_SIZE}, future_p {FUTURE_P}, {args.repeats} repeats")
+    print("ratio columns: this method's median time / the peer's (below 1: faster than that peer)")
+    print("torchrl_her's storage is sized to never wrap (its sample() fails after a wrap): it grows by")
+    print(f"{writes_needed(args.repeats)} episodes while the write timings run; every other buffer stays full.")
+    for n in args.episodes:
+        print(f"\n== {n} stored episodes ({n * EPISODE_LENGTH:,} transitions) ==", flush=True)
+        results = run(n, args.repeats, methods)
+        for title, field in (
+            ("draw a batch", "draw_ms"),
+            ("draw a batch, one episode written since the last draw", "draw_after_write_ms"),
+            ("write one episode", "write_ms"),
+        ):
+            print("\n" + _table(f"{title} ({n} episodes)", results, field))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,15 @@
+"""Touch-sensing Fetch PickAndPlace, Push and Slide as gymnasium and TorchRL envs.
+
+Example:
+    >>> from torchrl_cebp.envs import make_env
+    >>> make_env("push", seed=0).reset()["touch"].shape
+    torch.Size([2])
+"""
+
+from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, TASKS
+from torchrl_cebp.envs.torchrl_env import TouchFetchEnv, make_env
+from torchrl_cebp.envs.touch_fetch import gym_id, make_touch_fetch, register
+
+register()
+
+__all__ = ["GOAL_SPACES", "TASKS", "TouchFetchEnv", "gym_id", "make_env", "make_touch_fetch"]
