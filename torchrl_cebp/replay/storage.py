@@ -38,6 +38,16 @@ class _Field:
     stop: int
     shape: torch.Size  # per-transition shape
 
+    @property
+    def path(self) -> tuple[str, ...]:
+        return (self.key,) if isinstance(self.key, str) else tuple(self.key)
+
+    def from_columns(self, columns: torch.Tensor) -> torch.Tensor:
+        """The entry from its ``[B, width]`` columns (a view; no reshape for vector entries)."""
+        if len(self.shape) == 1:
+            return columns
+        return columns.unflatten(-1, self.shape) if self.shape else columns.squeeze(-1)
+
 
 def _is_pair_index(index: Any) -> bool:
     return (
@@ -91,8 +101,7 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             }
             packed = TensorDict(batch_size=storage.shape, device=storage.device)
             for field in fields:
-                view = blocks[field.dtype][..., field.start : field.stop].unflatten(-1, field.shape or (1,))
-                view = view if field.shape else view.squeeze(-1)
+                view = field.from_columns(blocks[field.dtype][..., field.start : field.stop])
                 view.copy_(storage.get(field.key))
                 packed.set(field.key, view)
             self._storage = packed
@@ -109,12 +118,11 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         gathered = {dtype: block.index_select(0, flat) for dtype, block in blocks.items()}
         tree: dict = {}
         for field in fields:
-            columns = gathered[field.dtype][:, field.start : field.stop]
-            *parents, name = (field.key,) if isinstance(field.key, str) else field.key
+            *parents, name = field.path
             node = tree
             for parent in parents:
                 node = node.setdefault(parent, {})
-            node[name] = columns.unflatten(-1, field.shape) if field.shape else columns.squeeze(-1)
+            node[name] = field.from_columns(gathered[field.dtype][:, field.start : field.stop])
         return _assemble(tree, flat.shape, self._storage.device)
 
 

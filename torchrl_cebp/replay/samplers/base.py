@@ -155,7 +155,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 f"(rows = episodes, columns = steps), got ndim={getattr(storage, 'ndim', 1)}"
             )
         rows = stored_rows(index)
-        episodes = storage[rows]
+        first, last = int(rows[0]), int(rows[-1])
+        # A write is usually one run of consecutive rows: read it as a view, not a copy.
+        episodes = storage._storage[first : last + 1] if last - first + 1 == rows.numel() else storage[rows]
         self._ensure_capacity(storage, episodes.shape[1])
         self.write_priorities(rows, episodes)
 
