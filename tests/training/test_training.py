@@ -1,0 +1,127 @@
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+from tensordict import TensorDict
+
+from torchrl_cebp.replay import HindsightRelabel
+from torchrl_cebp.training import ConfigError, load_checkpoint, train, validate_config
+from torchrl_cebp.training.trainer import RelabelledTransitions
+
+REPO = Path(__file__).resolve().parents[2]
+TINY = [
+    "epochs=2",
+    "cycles_per_epoch=2",
+    "updates_per_cycle=3",
+    "batch_size=16",
+    "test_episodes=2",
+    "replay.capacity=5000",
+    "agent.hidden=[32,32]",
+]
+SAMPLERS = ["her", "per", "ebp", "mep", "cper", "cebp", "cebp_released"]
+
+
+def config(*overrides: str):
+    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
+        return compose("config", overrides=[*TINY, *overrides])
+
+
+def rows(csv_path: Path) -> list[dict[str, str]]:
+    with csv_path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+PER_STATE_NOT_SAFE = pytest.mark.xfail(
+    strict=True,
+    reason="PERSampler.state_dict() returns torchrl's C++ segment trees, which torch.load(weights_only=True) "
+    "refuses; to be fixed in torchrl_cebp/replay/samplers/per.py (trees as tensors)",
+)
+
+
+@pytest.mark.parametrize("sampler", [pytest.param("per", marks=PER_STATE_NOT_SAFE), "mep", "cebp"])
+def test_tiny_run_writes_csv_and_checkpoint(tmp_path, sampler):
+    csv_path = train(config(f"sampler={sampler}", "env=pick_place"), tmp_path)
+    log = rows(csv_path)
+    assert [row["epoch"] for row in log] == ["0", "1"]
+    assert {"test_success", "loss_actor", "loss_value", "env_steps_per_s", "wall_s"} <= set(log[0])
+    assert 0.0 <= float(log[-1]["test_success"]) <= 1.0
+    state = load_checkpoint(tmp_path)  # weights_only=True: no pickled code inside
+    assert state["epoch"] == 1
+    assert {"loss", "normalizer", "actor_optim", "critic_optim", "replay", "rng"} <= set(state)
+
+
+def test_resume_repeats_the_uninterrupted_run(tmp_path):
+    # CEBP: the sampler's priorities and the IS weights must come back too
+    straight = rows(train(config("sampler=cebp"), tmp_path / "straight"))
+    train(config("sampler=cebp", "epochs=1"), tmp_path / "split")
+    resumed = rows(train(config("sampler=cebp", "resume=true"), tmp_path / "split"))
+    assert [row["epoch"] for row in resumed] == ["0", "1"]
+    for key in ("test_success", "loss_actor", "loss_value", "q_mean", "is_weight_mean"):
+        assert [float(r[key]) for r in resumed] == pytest.approx([float(r[key]) for r in straight], rel=1e-5)
+    assert load_checkpoint(tmp_path / "split")["epoch"] == 1
+
+
+def test_refuses_to_overwrite_a_checkpoint_or_resume_another_run(tmp_path):
+    train(config("epochs=1"), tmp_path)
+    with pytest.raises(ConfigError, match="resume=true"):
+        train(config("epochs=1"), tmp_path)
+    with pytest.raises(ConfigError, match="sampler="):
+        train(config("sampler=cper", "resume=true"), tmp_path)
+
+
+@pytest.mark.parametrize("sampler", SAMPLERS)
+@pytest.mark.parametrize("env", ["pick_place", "push", "slide"])
+def test_every_sampler_config_instantiates(sampler, env):
+    instantiate(config(f"sampler={sampler}", f"env={env}").sampler)
+
+
+def test_bad_values_are_listed_with_what_is_allowed():
+    with pytest.raises(ConfigError) as err:
+        validate_config(config("device=tpu", "epochs=0", "replay.future_p=1.5", "env.goal_space=huge"))
+    message = str(err.value)
+    assert "device='tpu': must be one of ['auto', 'cpu', 'cuda']" in message
+    assert "epochs=0: must be a positive integer" in message
+    assert "replay.future_p=1.5: must be a number in [0.0, 1.0]" in message
+    assert "env.goal_space='huge': must be one of ['standard', 'extended']" in message
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "train.py", *args], cwd=REPO, capture_output=True, text=True, timeout=120
+    )
+
+
+def test_cli_rejects_a_bad_value_at_start(tmp_path):
+    result = _cli("workers=-2", f"hydra.run.dir={tmp_path}")
+    assert result.returncode != 0
+    assert "workers=-2: must be a positive integer" in result.stderr
+
+
+def test_cli_lists_the_sampler_choices(tmp_path):
+    result = _cli("sampler=nope", f"hydra.run.dir={tmp_path}")
+    assert result.returncode != 0
+    assert "cebp_released" in result.stderr and "mep" in result.stderr
+
+
+def test_normaliser_sees_goals_achieved_later_in_the_episode():
+    n, T = 3, 5
+    achieved = torch.arange(n * T, dtype=torch.float32).reshape(n, T, 1).expand(n, T, 3)
+    episodes = TensorDict(
+        {
+            "observation": torch.zeros(n, T, 25),
+            "desired_goal": torch.full((n, T, 3), -1.0),
+            "next": {"achieved_goal": achieved.clone(), "desired_goal": torch.full((n, T, 3), -1.0)},
+        },
+        [n, T],
+    )
+    reward = lambda ag, g: torch.zeros(*ag.shape[:-1], 1)  # noqa: E731
+    feed = RelabelledTransitions(HindsightRelabel(reward, future_p=1.0), n, T)
+    goals = feed(episodes)["desired_goal"][:, 0].reshape(n, T)
+    step_ids = torch.arange(n * T, dtype=torch.float32).reshape(n, T)
+    # goal of (e, t) is the achieved goal of a later next-state of the same episode
+    assert (goals >= step_ids).all() and (goals < (torch.arange(n) + 1).unsqueeze(1) * T).all()

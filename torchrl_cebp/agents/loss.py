@@ -1,0 +1,94 @@
+"""DDPG loss with HER's clipped critic target and action penalty."""
+
+from __future__ import annotations
+
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModule
+from torchrl.objectives import DDPGLoss
+from torchrl.objectives.value import TD0Estimator
+
+
+class ClippedTD0Estimator(TD0Estimator):
+    """One-step TD target ``r + gamma * Q'(s', pi'(s'))`` clipped to ``[low, high]``.
+
+    With rewards in ``{-1, 0}`` every return lies in ``[-1/(1-gamma), 0]``; clipping the
+    bootstrapped target to that range keeps early, wild target estimates from feeding back.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl.modules import ValueOperator
+        >>> value = ValueOperator(torch.nn.Linear(3, 1), in_keys=["observation"])
+        >>> est = ClippedTD0Estimator(gamma=0.98, value_network=value, low=-50.0, high=0.0)
+        >>> td = TensorDict({"next": {"observation": torch.randn(4, 3), "reward": torch.full((4, 1), 7.0),
+        ...     "done": torch.zeros(4, 1, dtype=torch.bool), "terminated": torch.zeros(4, 1, dtype=torch.bool)}}, [4])
+        >>> est.value_estimate(td).max().item()
+        0.0
+    """
+
+    def __init__(self, *, low: float, high: float, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.low = low
+        self.high = high
+
+    def value_estimate(self, tensordict: TensorDictBase, *args, **kwargs) -> torch.Tensor:
+        return super().value_estimate(tensordict, *args, **kwargs).clamp(self.low, self.high)
+
+
+class HERDDPGLoss(DDPGLoss):
+    """TorchRL's :class:`~torchrl.objectives.DDPGLoss` set up as baselines' DDPG+HER.
+
+    - target actor and critic (update them with ``SoftUpdate(loss, tau=0.05)``);
+    - critic target clipped to ``[-1/(1-gamma), 0]`` (:class:`ClippedTD0Estimator`);
+    - importance-sampling weights (``"priority_weight"``, when the batch has them) weight
+      the critic's squared TD errors, as in DDPGLoss;
+    - the actor loss is ``-mean Q(s, pi(s)) + action_l2 * mean(pi(s)^2)``, unweighted:
+      the prioritised HER implementations (PER, CEBP) apply IS weights to the critic only.
+
+    ``"td_error"`` is written into the input batch for prioritised samplers.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> from torchrl_cebp.agents import make_actor, make_critic
+        >>> loss = HERDDPGLoss(make_actor(28, 4), make_critic(28, 4), gamma=0.98)
+        >>> def part(): return {"agent_input": torch.randn(8, 28)}
+        >>> batch = TensorDict({**part(), "action": torch.rand(8, 4), "next": {**part(),
+        ...     "reward": -torch.ones(8, 1), "done": torch.zeros(8, 1, dtype=torch.bool),
+        ...     "terminated": torch.zeros(8, 1, dtype=torch.bool)}}, [8])
+        >>> out = loss(batch)
+        >>> sorted(k for k in out.keys() if k.startswith("loss_"))
+        ['loss_actor', 'loss_value']
+        >>> bool((out["target_value"] <= 0).all() and (out["target_value"] >= -50).all())
+        True
+    """
+
+    def __init__(
+        self,
+        actor_network: TensorDictModule,
+        value_network: TensorDictModule,
+        *,
+        gamma: float,
+        action_l2: float = 1.0,
+    ) -> None:
+        super().__init__(actor_network, value_network, delay_actor=True, delay_value=True)
+        self.action_l2 = action_l2
+        self.make_value_estimator(
+            ClippedTD0Estimator(
+                gamma=gamma, value_network=self.actor_critic, low=-1.0 / (1.0 - gamma), high=0.0
+            )
+        )
+        # An estimator instance keeps its default keys; give it the loss's.
+        self._forward_value_estimator_keys()
+
+    def loss_actor(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict]:
+        td = tensordict.select(*self.actor_in_keys, *self.value_exclusive_keys, strict=False).detach()
+        with self.actor_network_params.to_module(self.actor_network, preserve_module_state=False):
+            td = self.actor_network(td)
+        with self._cached_detached_value_params.to_module(self.value_network, preserve_module_state=False):
+            td = self.value_network(td)
+        action = td.get(self.actor_network.out_keys[0])
+        action_penalty = action.square().mean()
+        q = td.get(self.tensor_keys.state_action_value)
+        loss = -q.mean() + self.action_l2 * action_penalty
+        return loss, {"action_l2": action_penalty.detach()}

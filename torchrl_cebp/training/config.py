@@ -1,0 +1,127 @@
+"""Checks of the training config that Hydra's own (group choices, known keys) leaves out."""
+
+from __future__ import annotations
+
+import math
+from numbers import Real
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from torchrl_cebp.envs import GOAL_SPACES, TASKS
+from torchrl_cebp.replay.her import STRATEGIES
+
+DEVICES = ("auto", "cpu", "cuda")
+ENV_BACKENDS = ("serial", "parallel")
+
+# ``${mul:a,b,...}`` lets a config derive a count, e.g. PER's beta-annealing horizon.
+if not OmegaConf.has_resolver("mul"):
+    OmegaConf.register_new_resolver("mul", lambda *factors: math.prod(factors))
+
+
+class ConfigError(ValueError):
+    """A config value outside its allowed range or set."""
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool)
+
+
+def validate_config(cfg: DictConfig) -> None:
+    """Raises :class:`ConfigError` listing every invalid value of ``cfg`` and what is allowed.
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> cfg = OmegaConf.create({"device": "tpu"})
+        >>> try:
+        ...     validate_config(cfg)
+        ... except ConfigError as err:
+        ...     print(str(err).splitlines()[1])
+          device='tpu': must be one of ['auto', 'cpu', 'cuda']
+    """
+    errors: list[str] = []
+
+    def check(key: str, ok, allowed: str) -> None:
+        value = OmegaConf.select(cfg, key)
+        if not ok(value):
+            errors.append(f"  {key}={value!r}: must be {allowed}")
+
+    def one_of(key: str, choices) -> None:
+        check(key, lambda v: v in choices, f"one of {list(choices)}")
+
+    def positive_int(key: str) -> None:
+        check(key, lambda v: _is_int(v) and v > 0, "a positive integer")
+
+    def real_in(key: str, low: float, high: float, *, open_low: bool = False) -> None:
+        bracket = "(" if open_low else "["
+        check(
+            key,
+            lambda v: _is_real(v) and (low < v if open_low else low <= v) and v <= high,
+            f"a number in {bracket}{low}, {high}]",
+        )
+
+    one_of("device", DEVICES)
+    one_of("env.task", TASKS)
+    one_of("env.goal_space", GOAL_SPACES)
+    one_of("env_backend", ENV_BACKENDS)
+    one_of("replay.strategy", STRATEGIES)
+    check("seed", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
+    for key in (
+        "workers", "epochs", "cycles_per_epoch", "rollouts_per_cycle", "updates_per_cycle",
+        "batch_size", "test_episodes", "threads", "replay.capacity",
+    ):
+        positive_int(key)
+    check("resume", lambda v: isinstance(v, bool), "true or false")
+    real_in("replay.future_p", 0.0, 1.0)
+    real_in("agent.tau", 0.0, 1.0, open_low=True)
+    real_in("agent.random_eps", 0.0, 1.0)
+    real_in("agent.noise_std", 0.0, math.inf)
+    real_in("agent.action_l2", 0.0, math.inf)
+    real_in("agent.lr_actor", 0.0, math.inf, open_low=True)
+    real_in("agent.lr_critic", 0.0, math.inf, open_low=True)
+    check("agent.hidden", lambda v: v is not None and len(v) > 0 and all(_is_int(h) and h > 0 for h in v),
+          "a non-empty list of positive integers")
+    if cfg.get("device") == "cuda" and not torch.cuda.is_available():
+        errors.append("  device='cuda': CUDA is not available here; use device=auto or device=cpu")
+    if errors:
+        raise ConfigError("invalid config:\n" + "\n".join(errors))
+
+
+def resolve_device(name: str) -> torch.device:
+    """``"auto"`` is CUDA when available, else the CPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+# What a resumed run must share with the checkpointed one (epochs may grow, device and threads may change).
+RUN_DEFINING_KEYS = (
+    "seed", "workers", "cycles_per_epoch", "rollouts_per_cycle", "updates_per_cycle", "batch_size",
+    "test_episodes", "env", "sampler", "agent", "replay",
+)
+
+
+def check_same_run(saved: dict, cfg: DictConfig) -> None:
+    """Raises :class:`ConfigError` when ``cfg`` differs from a checkpoint's config in a run-defining key.
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> check_same_run({"seed": 0, "epochs": 5}, OmegaConf.create({"seed": 0, "epochs": 9}))
+        >>> try:
+        ...     check_same_run({"seed": 0}, OmegaConf.create({"seed": 1}))
+        ... except ConfigError as err:
+        ...     print(err)
+        cannot resume: the checkpoint was made with seed=0, this config has seed=1
+    """
+    current = OmegaConf.to_container(cfg, resolve=True)
+    differences = [
+        f"{key}={saved.get(key)!r}, this config has {key}={current.get(key)!r}"
+        for key in RUN_DEFINING_KEYS
+        if saved.get(key) != current.get(key)
+    ]
+    if differences:
+        raise ConfigError("cannot resume: the checkpoint was made with " + "; ".join(differences))

@@ -1,0 +1,50 @@
+"""Per-epoch CSV log."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Any
+
+
+class EpochCsv:
+    """Appends one row per epoch to a CSV file; the columns are fixed by the first row.
+
+    Rows are flushed at once, so the file is complete up to the last finished epoch.
+    When resuming, rows of epochs at or after ``start_epoch`` (written after the last
+    checkpoint) are dropped first.
+
+    Examples:
+        >>> import tempfile, pathlib
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     log = EpochCsv(pathlib.Path(d) / "progress.csv")
+        ...     log.write({"epoch": 0, "test_success": 0.5})
+        ...     log.write({"epoch": 1, "test_success": 0.75})
+        ...     EpochCsv(log.path, start_epoch=1).path.read_text().splitlines()
+        ['epoch,test_success', '0,0.5']
+    """
+
+    def __init__(self, path: str | Path, start_epoch: int = 0) -> None:
+        self.path = Path(path)
+        self._fields: list[str] | None = None
+        if start_epoch > 0 and self.path.exists():
+            with self.path.open(newline="") as f:
+                reader = csv.DictReader(f)
+                self._fields = list(reader.fieldnames or [])
+                kept = [row for row in reader if int(row["epoch"]) < start_epoch]
+            self._rewrite(kept)
+        else:
+            self.path.unlink(missing_ok=True)
+
+    def _rewrite(self, rows: list[dict[str, Any]]) -> None:
+        with self.path.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=self._fields)
+            writer.writeheader()
+            writer.writerows(rows)
+
+    def write(self, row: dict[str, Any]) -> None:
+        if self._fields is None:
+            self._fields = list(row)
+            self._rewrite([])
+        with self.path.open("a", newline="") as f:
+            csv.DictWriter(f, fieldnames=self._fields).writerow(row)

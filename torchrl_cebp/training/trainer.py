@@ -1,0 +1,261 @@
+"""DDPG + HER training with any of the replay samplers, as in baselines' HER (readable top to bottom).
+
+An epoch is ``cycles_per_epoch`` cycles; a cycle collects ``rollouts_per_cycle x workers``
+whole episodes with a TorchRL collector over a batched env, stores them, runs
+``updates_per_cycle`` updates of ``batch_size x workers`` transitions, and moves the target
+networks. Each epoch ends with deterministic test episodes, a CSV row and a checkpoint.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictSequential
+from torchrl.collectors import Collector
+from torchrl.data import LazyTensorStorage
+from torchrl.data.replay_buffers.samplers import Sampler
+from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.objectives import SoftUpdate
+from tqdm import tqdm
+
+from torchrl_cebp.agents import HERDDPGLoss, HERExploration, ObsGoalNormalizer, make_actor, make_critic
+from torchrl_cebp.envs import make_env
+from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+from torchrl_cebp.training.checkpoint import (
+    has_checkpoint,
+    load_checkpoint,
+    rng_state,
+    save_checkpoint,
+    set_rng_state,
+)
+from torchrl_cebp.training.config import ConfigError, check_same_run, resolve_device, validate_config
+from torchrl_cebp.training.metrics import EpochCsv
+
+CSV_NAME = "progress.csv"
+
+
+def derive_seed(*keys: int) -> int:
+    """A 31-bit seed for one stream (e.g. ``(seed, epoch, stream)``), independent of the others."""
+    return int(np.random.SeedSequence(list(keys)).generate_state(1)[0] >> 1)
+
+
+class RelabelledTransitions:
+    """Every transition of a batch of new episodes ``[n, T]``, its goal relabelled as the replay would.
+
+    Baselines feeds its normaliser such relabelled transitions of each new batch of
+    episodes, so the goal statistics cover the goals the networks are trained on
+    (independently of how the sampler draws from the buffer).
+    """
+
+    def __init__(self, her: HindsightRelabel, n_episodes: int, episode_steps: int) -> None:
+        self.her = her
+        self.scratch = LazyTensorStorage(n_episodes * episode_steps, ndim=2)
+        rows, steps = torch.meshgrid(torch.arange(n_episodes), torch.arange(episode_steps), indexing="ij")
+        self.index = (rows.reshape(-1), steps.reshape(-1))
+
+    def __call__(self, episodes: TensorDictBase) -> TensorDictBase:
+        self.scratch.set(torch.arange(episodes.shape[0]), episodes)
+        _, info = self.her.expand(self.index, {}, self.scratch)
+        goal = info[self.her.desired_goal_key]
+        return TensorDict({"observation": episodes["observation"].reshape(goal.shape[0], -1), "desired_goal": goal},
+                          [goal.shape[0]])
+
+
+@torch.no_grad()
+def evaluate_success_rate(env: EnvBase, policy: TensorDictSequential, n_episodes: int, episode_steps: int) -> float:
+    """Success rate at the last step of ``n_episodes`` deterministic episodes on the batched ``env``."""
+    successes = []
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        for _ in range(math.ceil(n_episodes / env.batch_size[0])):
+            rollout = env.rollout(episode_steps, policy, break_when_any_done=False)
+            successes.append(rollout["next", "is_success"][:, -1, 0])
+    return torch.cat(successes)[:n_episodes].float().mean().item()
+
+
+def sampling_spread(sampler: Sampler) -> dict[str, float]:
+    """Effective fraction of stored episodes the sampler draws from, ``1 / (N sum p^2)``, when it exposes ``p``."""
+    n = getattr(sampler, "n_episodes", 0)
+    if not n or not hasattr(sampler, "probabilities"):
+        return {}
+    p = sampler.probabilities(torch.arange(n))
+    return {"priority_ess_fraction": (1.0 / (n * p.square().sum())).item()}
+
+
+def train(cfg: DictConfig, run_dir: str | Path) -> Path:
+    """Trains DDPG+HER as configured by ``cfg`` (see ``conf/config.yaml``); returns the CSV path.
+
+    ``run_dir`` receives ``progress.csv`` (one row per epoch) and ``checkpoint.pt``
+    (after each epoch). With ``cfg.resume`` the run continues after the checkpoint's epoch.
+    """
+    validate_config(cfg)
+    torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
+    sampler = instantiate(cfg.sampler)  # here, so that a bad sampler argument fails before the envs start
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    resuming = cfg.resume and has_checkpoint(run_dir)
+    if has_checkpoint(run_dir) and not cfg.resume:
+        raise ConfigError(
+            f"{run_dir} already holds a checkpoint: pass resume=true to continue that run, "
+            "or choose another output directory (hydra.run.dir=...)"
+        )
+    device = resolve_device(cfg.device)
+
+    # Environments: one batched env collects the training episodes, another runs the tests.
+    n_envs = cfg.rollouts_per_cycle * cfg.workers
+    env_fn = functools.partial(make_env, cfg.env.task, cfg.env.goal_space, device=device)
+    batched_env = SerialEnv if cfg.env_backend == "serial" else ParallelEnv
+    train_env, test_env = batched_env(n_envs, env_fn), batched_env(n_envs, env_fn)
+    spec_env = make_env(cfg.env.task, cfg.env.goal_space)
+    episode_steps = spec_env.max_episode_steps
+    obs_dim = spec_env.observation_spec["observation"].shape[-1]
+    goal_dim = spec_env.observation_spec["desired_goal"].shape[-1]
+    action_dim = spec_env.action_spec.shape[-1]
+
+    # Agent: the normaliser is shared by the policy and (outside the loss) the training batches.
+    normalizer = ObsGoalNormalizer(obs_dim, goal_dim).to(device)
+    actor = make_actor(obs_dim + goal_dim, action_dim, cfg.agent.hidden).to(device)
+    critic = make_critic(obs_dim + goal_dim, action_dim, cfg.agent.hidden).to(device)
+    loss = HERDDPGLoss(actor, critic, gamma=1.0 - 1.0 / episode_steps, action_l2=cfg.agent.action_l2)
+    target_updater = SoftUpdate(loss, tau=cfg.agent.tau)
+    actor_optim = torch.optim.Adam(loss.actor_network_params.values(True, True), lr=cfg.agent.lr_actor)
+    critic_optim = torch.optim.Adam(loss.value_network_params.values(True, True), lr=cfg.agent.lr_critic)
+    policy = TensorDictSequential(normalizer, actor)
+    exploration_policy = TensorDictSequential(
+        policy, HERExploration(random_eps=cfg.agent.random_eps, noise_std=cfg.agent.noise_std)
+    )
+
+    # Replay: whole episodes as rows, the configured sampler, HER relabelling at sampling time.
+    replay = make_replay_buffer(
+        sampler,
+        reward_fn=spec_env.compute_reward,
+        capacity=cfg.replay.capacity,
+        batch_size=cfg.batch_size * cfg.workers,
+        future_p=cfg.replay.future_p,
+        strategy=cfg.replay.strategy,
+    )
+    normalizer_feed = RelabelledTransitions(
+        HindsightRelabel(spec_env.compute_reward, future_p=cfg.replay.future_p, strategy=cfg.replay.strategy),
+        n_envs,
+        episode_steps,
+    )
+
+    collector = Collector(
+        train_env,
+        exploration_policy,
+        frames_per_batch=n_envs * episode_steps,
+        total_frames=-1,
+        storing_device="cpu",  # where the replay storage lives
+        auto_register_policy_transforms=False,
+    )
+    episode_batches = iter(collector)
+
+    start_epoch, wall_before = 0, 0.0
+    if resuming:
+        state = load_checkpoint(run_dir, map_location=device)
+        check_same_run(state["config"], cfg)
+        loss.load_state_dict(state["loss"])
+        normalizer.load_state_dict(state["normalizer"])
+        actor_optim.load_state_dict(state["actor_optim"])
+        critic_optim.load_state_dict(state["critic_optim"])
+        replay.load_state_dict(state["replay"])
+        # Restored last, so that building the collector above draws nothing from the restored stream.
+        set_rng_state(state["rng"])
+        start_epoch, wall_before = state["epoch"] + 1, state["wall_s"]
+    csv_log = EpochCsv(run_dir / CSV_NAME, start_epoch)
+    run_start = time.perf_counter()
+
+    progress = tqdm(range(start_epoch, cfg.epochs), initial=start_epoch, total=cfg.epochs, desc="epochs")
+    for epoch in progress:
+        epoch_start = time.perf_counter()
+        # Env randomness is reseeded per epoch, so a resumed run repeats an uninterrupted one.
+        collector.set_seed(derive_seed(cfg.seed, epoch, 0))
+        collector.reset()
+        totals: dict[str, torch.Tensor] = defaultdict(float)
+        collect_s = update_s = 0.0
+        for _ in range(cfg.cycles_per_epoch):
+            tick = time.perf_counter()
+            episodes = next(episode_batches).exclude("collector", normalizer.out_keys[0])
+            replay.extend(episodes)
+            normalizer.update(normalizer_feed(episodes))
+            collect_s += time.perf_counter() - tick
+
+            tick = time.perf_counter()
+            for _ in range(cfg.updates_per_cycle):
+                batch = replay.sample().to(device)
+                normalizer(batch)
+                normalizer(batch["next"])
+                losses = loss(batch)
+                actor_optim.zero_grad()
+                critic_optim.zero_grad()
+                (losses["loss_actor"] + losses["loss_value"]).backward()
+                actor_optim.step()
+                critic_optim.step()
+                replay.update_tensordict_priority(batch)  # a no-op unless the sampler is PER
+                for key in ("loss_actor", "loss_value", "action_l2"):
+                    totals[key] += losses[key].detach()
+                totals["q_mean"] += losses["pred_value"].mean()
+                if "priority_weight" in batch.keys():
+                    totals["is_weight_mean"] += batch["priority_weight"].mean()
+                    totals["is_weight_min"] += batch["priority_weight"].min()
+            target_updater.step()
+            update_s += time.perf_counter() - tick
+
+        if hasattr(sampler, "refit"):
+            sampler.refit(replay.storage)
+
+        tick = time.perf_counter()
+        test_env.set_seed(derive_seed(cfg.seed, epoch, 1))
+        success = evaluate_success_rate(test_env, policy, cfg.test_episodes * cfg.workers, episode_steps)
+        test_s = time.perf_counter() - tick
+
+        epoch_s = time.perf_counter() - epoch_start
+        env_steps = cfg.cycles_per_epoch * n_envs * episode_steps
+        n_updates = cfg.cycles_per_epoch * cfg.updates_per_cycle
+        wall_s = wall_before + time.perf_counter() - run_start
+        csv_log.write(
+            {
+                "epoch": epoch,
+                "test_success": success,
+                **{key: (value / n_updates).item() for key, value in totals.items()},
+                **sampling_spread(sampler),
+                "stored_episodes": len(replay.storage) // episode_steps,
+                "env_steps_per_s": env_steps / epoch_s,
+                "collect_s": collect_s,
+                "update_s": update_s,
+                "test_s": test_s,
+                "epoch_s": epoch_s,
+                "wall_s": wall_s,
+            }
+        )
+        save_checkpoint(
+            {
+                "epoch": epoch,
+                "wall_s": wall_s,
+                "config": OmegaConf.to_container(cfg, resolve=True),
+                "loss": loss.state_dict(),
+                "normalizer": normalizer.state_dict(),
+                "actor_optim": actor_optim.state_dict(),
+                "critic_optim": critic_optim.state_dict(),
+                "replay": replay.state_dict(),
+                "rng": rng_state(),
+            },
+            run_dir,
+        )
+        progress.set_postfix(success=f"{success:.3f}", steps_per_s=f"{env_steps / epoch_s:.0f}")
+        tqdm.write(f"epoch {epoch:3d}  test success {success:.3f}  ({env_steps / epoch_s:.0f} env steps/s)")
+
+    collector.shutdown()
+    test_env.close()
+    spec_env.close()
+    return run_dir / CSV_NAME

@@ -1,0 +1,26 @@
+"""Train DDPG + HER with a replay sampler on a touch-sensing Fetch task.
+
+    python train.py preset=quick                      # a couple of minutes on 2 CPU cores
+    python train.py sampler=cebp env=pick_place
+    python train.py -m sampler=her,cebp seed=0,1      # sweep, two jobs at a time
+    python train.py sampler=cebp env=pick_place resume=true   # continue after the last finished epoch
+
+Options: conf/config.yaml; groups env={pick_place,push,slide},
+sampler={her,per,ebp,mep,cper,cebp,cebp_released}, preset={default,quick,paper}.
+"""
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig
+
+from torchrl_cebp.training import train
+
+
+@hydra.main(config_path="conf", config_name="config", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    csv_path = train(cfg, HydraConfig.get().runtime.output_dir)
+    print(f"per-epoch results: {csv_path}")
+
+
+if __name__ == "__main__":
+    main()
