@@ -124,3 +124,17 @@ def test_memmap_storage(tmp_path):
                             scratch_dir=str(tmp_path), batch_size=32)
     rb.extend(make_episodes(3))
     assert rb.sample()["priority_weight"].shape == (32,)
+
+
+def test_per_state_dict_loads_with_weights_only(tmp_path):
+    rb = make_replay_buffer(PERSampler(10 * T), reward_fn=sparse_reward, capacity=10 * T, batch_size=16)
+    rb.extend(make_episodes(3))
+    batch = rb.sample()
+    batch.set("td_error", torch.linspace(0.1, 5.0, 16))
+    rb.update_tensordict_priority(batch)
+    torch.save(rb.sampler.state_dict(), tmp_path / "per.pt")
+    restored = PERSampler(10 * T)
+    restored.load_state_dict(torch.load(tmp_path / "per.pt", weights_only=True))
+    assert restored.draws == rb.sampler.draws == 1
+    every = torch.arange(10 * T)
+    assert torch.equal(torch.as_tensor(restored._sum_tree[every]), torch.as_tensor(rb.sampler._sum_tree[every]))

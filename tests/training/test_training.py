@@ -36,14 +36,7 @@ def rows(csv_path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-PER_STATE_NOT_SAFE = pytest.mark.xfail(
-    strict=True,
-    reason="PERSampler.state_dict() returns torchrl's C++ segment trees, which torch.load(weights_only=True) "
-    "refuses; to be fixed in torchrl_cebp/replay/samplers/per.py (trees as tensors)",
-)
-
-
-@pytest.mark.parametrize("sampler", [pytest.param("per", marks=PER_STATE_NOT_SAFE), "mep", "cebp"])
+@pytest.mark.parametrize("sampler", ["per", "mep", "cebp"])
 def test_tiny_run_writes_csv_and_checkpoint(tmp_path, sampler):
     csv_path = train(config(f"sampler={sampler}", "env=pick_place"), tmp_path)
     log = rows(csv_path)

@@ -1,7 +1,6 @@
 """Prioritized Experience Replay (PER, Schaul et al. 2016) over episode rows."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -68,19 +67,38 @@ class PERSampler(PrioritizedSampler):
         return super().sample(storage, batch_size)
 
     def state_dict(self) -> dict[str, Any]:
-        return {**super().state_dict(), "draws": self.draws}
+        """Plain tensors and numbers only (TorchRL's own holds C++ trees, which ``weights_only`` loads refuse)."""
+        every = torch.arange(self._max_capacity)
+        max_value, max_index = self._max_priority
+        return {
+            "alpha": self._alpha,
+            "beta": self._beta,
+            "eps": self._eps,
+            "max_priority": None if max_value is None else torch.as_tensor(max_value),
+            "max_priority_index": None if max_index is None else torch.as_tensor(max_index),
+            "sum_tree": torch.as_tensor(self._sum_tree[every]),
+            "min_tree": torch.as_tensor(self._min_tree[every]),
+            "draws": self.draws,
+        }
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
-        super().load_state_dict(state_dict)
-        self.draws = int(state_dict.get("draws", 0))
+        self._alpha = state_dict["alpha"]
+        self._beta = state_dict["beta"]
+        self._eps = state_dict["eps"]
+        self._init()
+        every = torch.arange(self._max_capacity)
+        self._sum_tree[every] = state_dict["sum_tree"]
+        self._min_tree[every] = state_dict["min_tree"]
+        self._max_priority = (state_dict["max_priority"], state_dict["max_priority_index"])
+        self.draws = int(state_dict["draws"])
 
     def dumps(self, path: str | Path) -> None:
-        super().dumps(path)
-        (Path(path) / "per_draws.json").write_text(json.dumps({"draws": self.draws}))
+        path = Path(path)
+        path.mkdir(parents=True, exist_ok=True)
+        torch.save(self.state_dict(), path / "per_sampler.pt")
 
     def loads(self, path: str | Path) -> None:
-        super().loads(path)
-        self.draws = json.loads((Path(path) / "per_draws.json").read_text())["draws"]
+        self.load_state_dict(torch.load(Path(path) / "per_sampler.pt", weights_only=True))
 
     def __repr__(self) -> str:
         return (
