@@ -9,7 +9,7 @@ import gymnasium_robotics
 import numpy as np
 import pytest
 import torch
-from tensordict import TensorDictBase
+from tensordict import TensorDict, TensorDictBase
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 from torchrl.envs.utils import check_env_specs, step_mdp
 
@@ -125,7 +125,7 @@ def test_compute_reward_is_vectorised_and_matches_step_reward():
     assert reward.shape == (2, 4, 1) and reward.dtype == torch.float32
     assert (reward[0] == 0).all() and (reward[1] == -1).all()
 
-    gymnasium_reward = env._env.compute_reward(achieved.double().numpy(), desired.double().numpy(), None)
+    gymnasium_reward = env._sims[0].compute_reward(achieved.double().numpy(), desired.double().numpy(), None)
     assert np.array_equal(gymnasium_reward, reward.squeeze(-1).numpy())
 
 
@@ -193,3 +193,28 @@ def test_batched_envs_roll_out(batched_cls):
         assert not torch.equal(td["desired_goal"][0, 0], td["desired_goal"][1, 0])
     finally:
         env.close()
+
+
+def test_num_envs_steps_a_batch_of_simulations_in_one_env():
+    check_env_specs(make_env("push", num_envs=3))
+    env = make_env("push", seed=0, num_envs=3)
+    td = env.rollout(env.max_episode_steps)
+    assert td.batch_size == (3, env.max_episode_steps)
+    assert td["next", "truncated"][:, -1].all() and not td["next", "truncated"][:, :-1].any()
+    goals = td["desired_goal"][:, 0]
+    assert not torch.equal(goals[0], goals[1])  # simulation i is seeded seed + i
+    again = make_env("push", seed=0, num_envs=3).reset()["desired_goal"]
+    assert torch.equal(again, goals)
+    single = make_env("push", seed=1).reset()["desired_goal"]
+    assert torch.equal(single, goals[1])
+
+
+def test_num_envs_partial_reset_leaves_the_other_simulations_running():
+    env = make_env("pick_place", seed=0, num_envs=2)
+    env.reset()
+    env.rand_step()
+    before = env._rows.copy()
+    env.reset(TensorDict({"_reset": torch.tensor([[True], [False]])}, [2]))
+    assert not np.array_equal(env._rows[0], before[0])
+    assert np.array_equal(env._rows[1], before[1])
+    assert env._steps.tolist() == [0, 1]

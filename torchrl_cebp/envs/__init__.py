@@ -6,10 +6,23 @@ Example:
     torch.Size([2])
 """
 
+from torchrl_cebp.envs.franka import FRANKA_TASK, FrankaPickPlaceEnv, make_franka
+from torchrl_cebp.envs.franka import register as register_franka
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, TASKS
 from torchrl_cebp.envs.torchrl_env import TouchFetchEnv, make_env
 from torchrl_cebp.envs.touch_fetch import gym_id, make_touch_fetch, register
 
 register()
+register_franka()
 
-__all__ = ["GOAL_SPACES", "TASKS", "TouchFetchEnv", "gym_id", "make_env", "make_touch_fetch"]
+__all__ = [
+    "FRANKA_TASK",
+    "GOAL_SPACES",
+    "TASKS",
+    "FrankaPickPlaceEnv",
+    "TouchFetchEnv",
+    "gym_id",
+    "make_env",
+    "make_franka",
+    "make_touch_fetch",
+]

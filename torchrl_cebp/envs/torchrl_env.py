@@ -1,4 +1,4 @@
-"""TorchRL env driving a touch-sensing Fetch gymnasium env directly (no GymEnv wrapper or transforms)."""
+"""TorchRL env driving touch-sensing Fetch gymnasium envs directly (no GymEnv wrapper or transforms)."""
 
 from __future__ import annotations
 
@@ -22,35 +22,58 @@ class TouchFetchEnv(EnvBase):
     ``"next"`` adds float32 ``reward`` [1] (0 on success else -1) and bool ``done``/``terminated``/``truncated`` [1]
     (truncated after ``max_episode_steps``, never terminated).
 
+    With ``num_envs=n`` one env steps ``n`` MuJoCo simulations in a loop and has batch size ``[n]``:
+    TorchRL's per-step overhead is then paid once per batch instead of once per simulation, which
+    makes it several times cheaper than ``SerialEnv(n, ...)`` for these fast simulations.
+
     Example:
         >>> env = TouchFetchEnv("push", "extended")
         >>> env.rollout(3)["next", "touch"].shape
         torch.Size([3, 2])
+        >>> TouchFetchEnv("push", num_envs=4).rollout(3)["next", "touch"].shape
+        torch.Size([4, 3, 2])
     """
 
-    def __init__(self, task: str, goal_space: str = "standard", device: torch.device | str = "cpu") -> None:
-        super().__init__(device=device, batch_size=torch.Size([]))
-        self._env = make_touch_fetch(task, goal_space)
+    def __init__(
+        self,
+        task: str,
+        goal_space: str = "standard",
+        device: torch.device | str = "cpu",
+        num_envs: int | None = None,
+    ) -> None:
+        batch_size = torch.Size([] if num_envs is None else [num_envs])
+        super().__init__(device=device, batch_size=batch_size)
+        self._sims = [make_touch_fetch(task, goal_space) for _ in range(max(1, batch_size.numel()))]
+        first = self._sims[0]
         self.task = task
         self.goal_space = goal_space
-        self.max_episode_steps = self._env.max_episode_steps
-        self.distance_threshold = self._env.distance_threshold
-        self._steps = 0
-        obs_dim = self._env.observation_space["observation"].shape[0]
+        self.max_episode_steps = first.max_episode_steps
+        self.distance_threshold = first.distance_threshold
+        self._steps = np.zeros(len(self._sims), dtype=np.int64)
+        obs_dim = first.observation_space["observation"].shape[0]
         self._sizes = (obs_dim, 3, 3, 2)
+        # Last observation of every simulation, one row each, so a partial reset can keep the others.
+        self._rows = np.zeros((len(self._sims), sum(self._sizes)), dtype=np.float32)
+
+        def vector(size: int) -> Unbounded:
+            return Unbounded((*batch_size, size), dtype=torch.float32, device=self.device)
+
+        def flag() -> Categorical:
+            return Categorical(2, (*batch_size, 1), dtype=torch.bool, device=self.device)
+
         self.observation_spec = Composite(
-            observation=Unbounded((obs_dim,), dtype=torch.float32, device=self.device),
-            achieved_goal=Unbounded((3,), dtype=torch.float32, device=self.device),
-            desired_goal=Unbounded((3,), dtype=torch.float32, device=self.device),
-            touch=Unbounded((2,), dtype=torch.float32, device=self.device),
-            is_success=Categorical(2, (1,), dtype=torch.bool, device=self.device),
+            observation=vector(obs_dim),
+            achieved_goal=vector(3),
+            desired_goal=vector(3),
+            touch=vector(2),
+            is_success=flag(),
+            shape=batch_size,
             device=self.device,
         )
-        self.action_spec = Bounded(-1.0, 1.0, (4,), dtype=torch.float32, device=self.device)
-        self.reward_spec = Unbounded((1,), dtype=torch.float32, device=self.device)
+        self.action_spec = Bounded(-1.0, 1.0, (*batch_size, 4), dtype=torch.float32, device=self.device)
+        self.reward_spec = vector(1)
         self.done_spec = Composite(
-            {key: Categorical(2, (1,), dtype=torch.bool, device=self.device) for key in ("done", "terminated", "truncated")},
-            device=self.device,
+            {key: flag() for key in ("done", "terminated", "truncated")}, shape=batch_size, device=self.device
         )
 
     def compute_reward(self, achieved_goal: torch.Tensor, desired_goal: torch.Tensor) -> torch.Tensor:
@@ -65,39 +88,73 @@ class TouchFetchEnv(EnvBase):
         # Same sign convention as gymnasium-robotics (-1 beyond the threshold), without its -0.0.
         return (distance <= self.distance_threshold).to(torch.float32) - 1.0
 
-    def _read(self, obs: dict[str, np.ndarray]) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
-        # One float32 conversion and one tensor per step; the entries are views into it.
-        flat = torch.from_numpy(np.concatenate([*(obs[key] for key in _OBS_KEYS), self._env.touch]).astype(np.float32))
-        out = dict(zip((*_OBS_KEYS, "touch"), flat.split(self._sizes)))
+    def _store(self, i: int, obs: dict[str, np.ndarray]) -> None:
+        row, start = self._rows[i], 0
+        for value in (*(obs[key] for key in _OBS_KEYS), self._sims[i].touch):
+            row[start : start + value.shape[0]] = value
+            start += value.shape[0]
+
+    def _read(self) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+        # One tensor for the whole batch; the entries are views into it.
+        flat = torch.from_numpy(self._rows.copy())
+        if not self.batch_size:
+            flat = flat.squeeze(0)
+        out = dict(zip((*_OBS_KEYS, "touch"), flat.split(self._sizes, dim=-1)))
         # Reward from the float32 goals, so it matches compute_reward on stored transitions bit for bit.
         reward = self.compute_reward(out["achieved_goal"], out["desired_goal"])
         out["is_success"] = reward == 0
         return out, reward
 
+    def _flags(self, values: np.ndarray) -> torch.Tensor:
+        flags = torch.from_numpy(values).reshape(*self.batch_size, 1)
+        return flags.clone() if flags.data_ptr() == 0 else flags
+
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        obs, _ = self._env.reset()
-        self._steps = 0
-        out, _ = self._read(obs)
-        not_done = torch.zeros(1, dtype=torch.bool)
+        chosen = range(len(self._sims))
+        if tensordict is not None and "_reset" in tensordict.keys() and self.batch_size:
+            chosen = tensordict.get("_reset").reshape(-1).nonzero().squeeze(-1).tolist()
+        for i in chosen:
+            obs, _ = self._sims[i].reset()
+            self._steps[i] = 0
+            self._store(i, obs)
+        out, _ = self._read()
+        not_done = self._flags(np.zeros(len(self._sims), dtype=bool))
         out.update(done=not_done, terminated=not_done.clone(), truncated=not_done.clone())
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
-        obs, *_ = self._env.step(tensordict.get("action").cpu().numpy())
+        actions = tensordict.get("action").cpu().numpy().reshape(len(self._sims), -1)
+        for i, (sim, action) in enumerate(zip(self._sims, actions)):
+            obs, *_ = sim.step(action)
+            self._store(i, obs)
         self._steps += 1
-        out, reward = self._read(obs)
-        truncated = torch.tensor([self._steps >= self.max_episode_steps])
-        out.update(reward=reward, done=truncated, terminated=torch.zeros(1, dtype=torch.bool), truncated=truncated.clone())
+        out, reward = self._read()
+        truncated = self._flags(self._steps >= self.max_episode_steps)
+        out.update(
+            reward=reward,
+            done=truncated,
+            terminated=torch.zeros_like(truncated),
+            truncated=truncated.clone(),
+        )
         return TensorDict(out, batch_size=self.batch_size, device=self.device)
 
     def _set_seed(self, seed: int | None) -> None:
-        self._env.np_random, _ = seeding.np_random(seed)
+        # Simulation i draws from seed + i: distinct streams, reproducible from one seed.
+        for i, sim in enumerate(self._sims):
+            sim.np_random, _ = seeding.np_random(None if seed is None else seed + i)
 
 
-def make_env(task: str, goal_space: str = "standard", seed: int | None = None, device: torch.device | str = "cpu") -> EnvBase:
+def make_env(
+    task: str,
+    goal_space: str = "standard",
+    seed: int | None = None,
+    device: torch.device | str = "cpu",
+    num_envs: int | None = None,
+) -> EnvBase:
     """The TorchRL env of ``task`` (``pick_place``, ``push``, ``slide``) under ``goal_space`` (``standard``, ``extended``).
 
-    Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.
+    ``num_envs=n`` gives one env of batch size ``[n]`` stepping ``n`` simulations (seeded
+    ``seed``, ``seed + 1``, ...). Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.
 
     Example:
         >>> env = make_env("pick_place", "extended", seed=0)
@@ -105,7 +162,7 @@ def make_env(task: str, goal_space: str = "standard", seed: int | None = None, d
         >>> bool(td["next", "truncated"][-1])
         True
     """
-    env = TouchFetchEnv(task, goal_space, device=device)
+    env = TouchFetchEnv(task, goal_space, device=device, num_envs=num_envs)
     if seed is not None:
         env.set_seed(seed)
     return env

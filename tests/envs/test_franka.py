@@ -1,0 +1,78 @@
+"""Franka pick-and-place in MuJoCo: gymnasium contract, Fetch observation layout, goal space, touch physics."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from torchrl_cebp.envs import FRANKA_TASK, FrankaPickPlaceEnv, make_franka
+from torchrl_cebp.envs.franka import FRANKA_GYM_ID, FrankaLayout, sample_goal
+
+
+@pytest.fixture(scope="module")
+def env() -> FrankaPickPlaceEnv:
+    return FrankaPickPlaceEnv()
+
+
+def drive(env: FrankaPickPlaceEnv, obs: dict, target: np.ndarray, gripper: float, steps: int) -> tuple[dict, list]:
+    """Proportional control of the grip point towards ``target``; returns the last observation and each step's touch."""
+    touches = []
+    for _ in range(steps):
+        move = np.clip((target - obs["observation"][:3]) / 0.05, -1, 1)
+        obs, _, _, _, info = env.step(np.append(move, gripper).astype(np.float32))
+        touches.append(info["touch"])
+    return obs, touches
+
+
+def test_gymnasium_contract_and_registration(env):
+    check_env(env, skip_render_check=True)
+    assert FRANKA_TASK == "franka_pick_place"
+    registered = gym.make(FRANKA_GYM_ID)
+    assert registered.spec.max_episode_steps == 100
+    with pytest.raises(ValueError, match="valid goal spaces: standard"):
+        make_franka("extended")
+
+
+def test_fetch_layout(env):
+    obs, info = env.reset(seed=0)
+    assert obs["observation"].shape == (25,) and obs["desired_goal"].shape == (3,)
+    assert env.action_space.shape == (4,) and env.max_episode_steps == 100
+    np.testing.assert_array_equal(obs["achieved_goal"], obs["observation"][3:6])
+    np.testing.assert_allclose(obs["observation"][6:9], obs["observation"][3:6] - obs["observation"][:3])
+    assert info["touch"].shape == (2,)
+    # Fetch's sparse reward, vectorised.
+    goals = np.zeros((4, 3))
+    assert env.compute_reward(goals + 0.01, goals, {}).tolist() == [0, 0, 0, 0]
+
+
+def test_goal_and_object_ranges(env):
+    layout = FrankaLayout()
+    rng = np.random.default_rng(0)
+    goals = np.stack([sample_goal(layout, rng) for _ in range(4000)])
+    centre = np.asarray(layout.table_centre)
+    assert np.abs(goals[:, :2] - centre).max() <= layout.target_range
+    lifted = goals[:, 2] > layout.cube_centre_height
+    assert 0.47 < lifted.mean() < 0.53
+    assert goals[:, 2].max() <= layout.cube_centre_height + layout.target_height
+    for seed in range(10):
+        obs, _ = env.reset(seed=seed)
+        assert np.abs(obs["observation"][3:5] - centre).max() <= layout.obj_range + 1e-3
+        assert obs["observation"][5] == pytest.approx(layout.cube_centre_height, abs=2e-3)
+
+
+def test_touch_only_while_holding_the_cube(env):
+    obs, _ = env.reset(seed=3)
+    cube = obs["observation"][3:6].copy()
+    obs, approach = drive(env, obs, cube + [0, 0, 0.1], gripper=1.0, steps=8)
+    obs, descend = drive(env, obs, cube, gripper=1.0, steps=6)
+    obs, close = drive(env, obs, cube, gripper=-1.0, steps=6)
+    obs, lift = drive(env, obs, cube + [0, 0, 0.15], gripper=-1.0, steps=8)
+
+    for touch in approach + descend:  # open gripper moving in free air
+        np.testing.assert_array_equal(touch, np.zeros(2))
+    for touch in close[-2:] + lift:  # holding the cube
+        assert (touch > 0).all(), touch
+    assert obs["achieved_goal"][2] > cube[2] + 0.12  # lifted with the gripper
+    assert np.linalg.norm(obs["observation"][6:9]) < 0.02  # still between the fingers
