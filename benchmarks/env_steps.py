@@ -4,7 +4,8 @@ Four rows, one torch thread; the envs take turns in short rounds and each report
 so load from other processes on a shared machine skews the ratios less:
   * plain gymnasium-robotics ``FetchPush-v4`` (``gym.make``, no touch sensing),
   * our touch-sensing gymnasium env ``TouchFetchPush-v0`` (``gym.make``: the simulation's share),
-  * ``TouchFetchEnv`` (our ``EnvBase`` driving the MuJoCo env directly),
+  * ``TouchFetchEnv`` (our ``EnvBase`` driving the MuJoCo env directly), one simulation and a
+    batch of 16 (``num_envs=16``: one TorchRL step drives 16 simulations, as the trainer uses it),
   * TorchRL ``GymEnv`` + ``DoubleToFloat`` + an info-dict reader on the same touch env
     (the generic way to get the same keys), for comparison.
 
@@ -54,19 +55,22 @@ def gymnasium_round(env_id: str, seed: int = 0) -> Callable[[int], float]:
 
 
 def torchrl_round(env: EnvBase) -> Callable[[int], float]:
-    """A function timing ``steps`` steps (seconds) of ``env.rollout`` with random actions, auto-resetting.
+    """A function timing ``steps`` simulation steps (seconds) of ``env.rollout`` with random actions.
+
+    A batched env advances ``batch`` simulations per rollout step, so it rolls out ``steps / batch`` steps.
 
     Example:
         >>> torchrl_round(make_env("push", seed=0))(20) > 0
         True
     """
+    batch = env.batch_size.numel()
 
     def random_policy(td: TensorDictBase) -> TensorDictBase:
-        return td.set("action", torch.rand(4) * 2 - 1)
+        return td.set("action", env.action_spec.rand())
 
     def run(steps: int) -> float:
         start = time.perf_counter()
-        env.rollout(steps, random_policy, break_when_any_done=False)
+        env.rollout(max(1, steps // batch), random_policy, break_when_any_done=False)
         return time.perf_counter() - start
 
     return run
@@ -90,7 +94,7 @@ def gymenv_with_transforms(task: str = "push") -> EnvBase:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=200, help="steps per round")
+    parser.add_argument("--steps", type=int, default=320, help="simulation steps per round")
     parser.add_argument("--rounds", type=int, default=10)
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -100,6 +104,7 @@ def main() -> None:
         "gymnasium FetchPush-v4 (plain, no touch)": gymnasium_round("FetchPush-v4"),
         "gymnasium TouchFetchPush-v0 (ours, no torch)": gymnasium_round("TouchFetchPush-v0"),
         "torchrl_cebp make_env('push') (EnvBase)": torchrl_round(make_env("push", seed=0)),
+        "torchrl_cebp make_env('push', num_envs=16)": torchrl_round(make_env("push", seed=0, num_envs=16)),
         "GymEnv(TouchFetchPush-v0) + DoubleToFloat": torchrl_round(gymenv_with_transforms("push")),
     }
     best = {name: float("inf") for name in contenders}
