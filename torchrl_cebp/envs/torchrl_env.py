@@ -40,10 +40,12 @@ class TouchFetchEnv(EnvBase):
         goal_space: str = "standard",
         device: torch.device | str = "cpu",
         num_envs: int | None = None,
+        render_size: tuple[int, int] | None = None,
     ) -> None:
         batch_size = torch.Size([] if num_envs is None else [num_envs])
         super().__init__(device=device, batch_size=batch_size)
-        self._sims = [make_touch_fetch(task, goal_space) for _ in range(max(1, batch_size.numel()))]
+        render = {} if render_size is None else {"render_mode": "rgb_array", "width": render_size[0], "height": render_size[1]}
+        self._sims = [make_touch_fetch(task, goal_space, **render) for _ in range(max(1, batch_size.numel()))]
         first = self._sims[0]
         self.task = task
         self.goal_space = goal_space
@@ -87,6 +89,20 @@ class TouchFetchEnv(EnvBase):
         distance = torch.linalg.vector_norm(achieved_goal - desired_goal, dim=-1, keepdim=True)
         # Same sign convention as gymnasium-robotics (-1 beyond the threshold), without its -0.0.
         return (distance <= self.distance_threshold).to(torch.float32) - 1.0
+
+    def render(self) -> np.ndarray:
+        """RGB frames ``[*batch, H, W, 3]`` of the simulations (build the env with ``render_size``).
+
+        Example:
+            >>> env = TouchFetchEnv("push", render_size=(64, 48))
+            >>> _ = env.reset()
+            >>> env.render().shape
+            (48, 64, 3)
+        """
+        if self._sims[0].render_mode != "rgb_array":
+            raise RuntimeError("this env renders nothing: build it with render_size=(width, height)")
+        frames = np.stack([sim.render() for sim in self._sims])
+        return frames if self.batch_size else frames[0]
 
     def _store(self, i: int, obs: dict[str, np.ndarray]) -> None:
         row, start = self._rows[i], 0
@@ -150,11 +166,12 @@ def make_env(
     seed: int | None = None,
     device: torch.device | str = "cpu",
     num_envs: int | None = None,
+    render_size: tuple[int, int] | None = None,
 ) -> EnvBase:
     """The TorchRL env of ``task`` (``pick_place``, ``push``, ``slide``) under ``goal_space`` (``standard``, ``extended``).
 
     ``num_envs=n`` gives one env of batch size ``[n]`` stepping ``n`` simulations (seeded
-    ``seed``, ``seed + 1``, ...). Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.
+    ``seed``, ``seed + 1``, ...); ``render_size=(width, height)`` enables ``env.render()``. Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.
 
     Example:
         >>> env = make_env("pick_place", "extended", seed=0)
@@ -162,7 +179,7 @@ def make_env(
         >>> bool(td["next", "truncated"][-1])
         True
     """
-    env = TouchFetchEnv(task, goal_space, device=device, num_envs=num_envs)
+    env = TouchFetchEnv(task, goal_space, device=device, num_envs=num_envs, render_size=render_size)
     if seed is not None:
         env.set_seed(seed)
     return env

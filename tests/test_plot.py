@@ -1,0 +1,42 @@
+"""The plot command draws a PNG from the runs of a sweep."""
+import numpy as np
+import pytest
+from PIL import Image
+
+from torchrl_cebp.plot import collect_sweep, main, quartiles
+
+
+def write_run(folder, success):
+    folder.mkdir(parents=True)
+    lines = ["epoch,test_success,loss_actor"] + [f"{e},{s},0.1" for e, s in enumerate(success)]
+    (folder / "progress.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_plot_groups_seeds_and_draws_a_png(tmp_path, capsys):
+    write_run(tmp_path / "push-standard/her/default/seed0", [0.0, 0.1, 0.2])
+    write_run(tmp_path / "push-standard/her/default/seed1", [0.0, 0.3, 0.4])
+    write_run(tmp_path / "push-standard/cebp/default/seed0", [0.1, 0.5])
+    groups = collect_sweep(tmp_path, "test_success")
+    assert set(groups) == {"push-standard"}
+    assert sorted(groups["push-standard"]) == ["cebp/default", "her/default"]
+    assert len(groups["push-standard"]["her/default"]) == 2
+    main([str(tmp_path)])
+    png = tmp_path / "test_success.png"
+    assert "wrote" in capsys.readouterr().out
+    image = np.asarray(Image.open(png).convert("RGB"))
+    assert image.shape[0] > 100 and image.std() > 10  # a real figure, not a blank canvas
+
+
+def test_quartiles_over_seeds():
+    q25, median, q75 = quartiles([np.array([0.0, 0.2]), np.array([0.4, 0.6]), np.array([0.8, 1.0])])
+    np.testing.assert_allclose(median, [0.4, 0.6])
+    np.testing.assert_allclose(q25, [0.2, 0.4])
+    np.testing.assert_allclose(q75, [0.6, 0.8])
+
+
+def test_errors_name_the_problem(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no progress.csv"):
+        main([str(tmp_path)])
+    write_run(tmp_path / "a/b/seed0", [0.1])
+    with pytest.raises(KeyError, match="'success'.*test_success"):
+        main([str(tmp_path), "--metric", "success"])

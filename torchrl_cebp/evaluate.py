@@ -1,0 +1,96 @@
+"""Evaluate a training checkpoint: success rate over N deterministic episodes, and a video of a few.
+
+    python -m torchrl_cebp.evaluate runs/push-standard/cebp/default/seed0 --episodes 50 --video push.mp4
+
+The env (task and goal space) comes from the checkpoint's config; ``--video`` writes an MP4 or a
+GIF (by extension) rendered offscreen (``MUJOCO_GL=osmesa`` on a CPU-only machine).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from torchrl_cebp.training.checkpoint import CHECKPOINT_NAME
+
+VIDEO_SUFFIXES = (".mp4", ".gif")
+
+
+def _checkpoint_env(checkpoint: Path) -> tuple[str, str]:
+    path = checkpoint / CHECKPOINT_NAME if checkpoint.is_dir() else checkpoint
+    config = torch.load(path, map_location="cpu", weights_only=True)["config"]
+    return config["env"]["task"], config["env"]["goal_space"]
+
+
+@torch.no_grad()
+def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -> float:
+    """Fraction of ``episodes`` deterministic episodes that end within the goal threshold."""
+    from torchrl_cebp.envs import make_env
+    from torchrl_cebp.sim2real.policy import load_policy
+
+    task, goal_space = _checkpoint_env(Path(checkpoint))
+    policy = load_policy(checkpoint)
+    env = make_env(task, goal_space, seed=seed, num_envs=episodes)
+    rollout = env.rollout(env.max_episode_steps, policy, break_when_any_done=False)
+    return rollout["next", "is_success"][:, -1].float().mean().item()
+
+
+@torch.no_grad()
+def record_video(
+    checkpoint: str | Path,
+    path: str | Path,
+    episodes: int = 2,
+    seed: int = 1234,
+    size: tuple[int, int] = (480, 360),
+    fps: int = 25,
+) -> Path:
+    """Renders ``episodes`` deterministic episodes to ``path`` (``.mp4`` or ``.gif``)."""
+    import imageio.v3 as iio
+
+    from torchrl_cebp.envs import make_env
+    from torchrl_cebp.sim2real.policy import load_policy
+
+    path = Path(path)
+    if path.suffix not in VIDEO_SUFFIXES:
+        raise ValueError(f"video {str(path)!r}: unknown format {path.suffix!r}; valid: {list(VIDEO_SUFFIXES)}")
+    task, goal_space = _checkpoint_env(Path(checkpoint))
+    policy = load_policy(checkpoint)
+    env = make_env(task, goal_space, seed=seed, render_size=size)
+    frames = []
+    for _ in range(episodes):
+        td = env.reset()
+        frames.append(env.render())
+        for _ in range(env.max_episode_steps):
+            td = env.step(policy(td))
+            frames.append(env.render())
+            td = td["next"].exclude("reward", "done", "terminated", "truncated")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix == ".gif":
+        iio.imwrite(path, np.stack(frames), duration=1000 / fps, loop=0)
+    else:
+        iio.imwrite(path, np.stack(frames), fps=fps, codec="libx264")
+    return path
+
+
+def main(argv: list[str] | None = None) -> None:
+    os.environ.setdefault("MUJOCO_GL", "osmesa")
+    parser = argparse.ArgumentParser(description="Success rate of a checkpoint, and a video of a few episodes.")
+    parser.add_argument("checkpoint", help="a run directory or its checkpoint.pt")
+    parser.add_argument("--episodes", type=int, default=10, help="test episodes for the success rate")
+    parser.add_argument("--video", help="write a video of a few episodes here (.mp4 or .gif)")
+    parser.add_argument("--video-episodes", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=1234)
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error(f"--episodes must be at least 1, got {args.episodes}")
+    rate = success_rate(args.checkpoint, args.episodes, args.seed)
+    print(f"success rate over {args.episodes} episodes: {rate:.3f}")
+    if args.video:
+        print(f"wrote {record_video(args.checkpoint, args.video, args.video_episodes, args.seed)}")
+
+
+if __name__ == "__main__":
+    main()

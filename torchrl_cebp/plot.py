@@ -1,0 +1,107 @@
+"""Success curves of a sweep: median and interquartile range over seeds, per sampler and task.
+
+    python -m torchrl_cebp.plot runs                      # writes runs/success.png
+    python -m torchrl_cebp.plot runs --out fig.png --metric test_success
+
+A run is any folder holding a ``progress.csv``; runs are grouped by their parent folder (the
+seeds of one configuration), and one panel is drawn per top-level folder under the sweep root
+(``<task>-<goal_space>`` with the trainer's layout ``runs/<task>-<goal_space>/<sampler>/<preset>/seed<k>``).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+from collections import defaultdict
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+CSV_NAME = "progress.csv"
+
+
+def read_curve(path: Path, metric: str) -> np.ndarray:
+    """The ``metric`` column of one run's CSV, indexed by epoch.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     p = Path(d) / "progress.csv"
+        ...     _ = p.write_text("epoch,test_success\\n0,0.1\\n1,0.3\\n")
+        ...     read_curve(p, "test_success").tolist()
+        [0.1, 0.3]
+    """
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    if rows and metric not in rows[0]:
+        raise KeyError(f"{path} has no column {metric!r}; columns: {sorted(rows[0])}")
+    return np.array([float(row[metric]) for row in sorted(rows, key=lambda r: int(r["epoch"]))])
+
+
+def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarray]]]:
+    """``{panel: {curve label: [one curve per seed]}}`` for every ``progress.csv`` under ``root``."""
+    groups: dict[str, dict[str, list[np.ndarray]]] = defaultdict(lambda: defaultdict(list))
+    for path in sorted(root.rglob(CSV_NAME)):
+        configuration = path.parent.parent.relative_to(root).parts
+        panel = configuration[0] if len(configuration) > 1 else root.name
+        label = "/".join(configuration[1:] if len(configuration) > 1 else configuration) or path.parent.name
+        curve = read_curve(path, metric)
+        if curve.size:
+            groups[panel][label].append(curve)
+    return groups
+
+
+def quartiles(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """25th, 50th and 75th percentiles per epoch over the seeds that reached that epoch.
+
+    Examples:
+        >>> q25, median, q75 = quartiles([np.array([0.0, 1.0]), np.array([1.0])])
+        >>> median.tolist()
+        [0.5, 1.0]
+    """
+    length = max(len(c) for c in curves)
+    padded = np.full((len(curves), length), np.nan)
+    for i, curve in enumerate(curves):
+        padded[i, : len(curve)] = curve
+    return tuple(np.nanpercentile(padded, q, axis=0) for q in (25, 50, 75))
+
+
+def plot_sweep(root: str | Path, out: str | Path | None = None, metric: str = "test_success") -> Path:
+    """Draws one panel per task, one median line and interquartile band per configuration; returns the PNG path."""
+    root = Path(root)
+    groups = collect_sweep(root, metric)
+    if not groups:
+        raise FileNotFoundError(f"no {CSV_NAME} under {root}")
+    out = Path(out) if out is not None else root / f"{metric}.png"
+    fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.8), squeeze=False)
+    for ax, (panel, curves_by_label) in zip(axes[0], sorted(groups.items())):
+        for label, curves in sorted(curves_by_label.items()):
+            q25, median, q75 = quartiles(curves)
+            epochs = np.arange(len(median))
+            (line,) = ax.plot(epochs, median, label=f"{label} ({len(curves)} seed{'s' * (len(curves) > 1)})")
+            ax.fill_between(epochs, q25, q75, color=line.get_color(), alpha=0.2)
+        ax.set_title(panel)
+        ax.set_xlabel("epoch")
+        ax.set_ylabel(metric.replace("_", " "))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description="Median and interquartile success curves of a sweep.")
+    parser.add_argument("root", help="sweep folder (e.g. runs/ or multirun/...)")
+    parser.add_argument("--out", help="PNG path (default: <root>/<metric>.png)")
+    parser.add_argument("--metric", default="test_success", help="CSV column to plot")
+    args = parser.parse_args(argv)
+    print(f"wrote {plot_sweep(args.root, args.out, args.metric)}")
+
+
+if __name__ == "__main__":
+    main()
