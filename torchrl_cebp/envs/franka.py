@@ -148,8 +148,6 @@ def franka_spec(layout: FrankaLayout = FrankaLayout()) -> mujoco.MjSpec:
         finger.add_geom(
             name=f"robot0:{side}_pad_geom", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.012, 0.004, 0.03],
             pos=[0.0, -inward * 0.004, _PAD_POS[2]], friction=[1.0, 0.005, 0.0001], condim=4,
-            solref=[0.005, 1.0], solimp=[0.95, 0.99, 0.001, 0.5, 2.0],
-            rgba=[0.2, 0.2, 0.2, 1],
         )
         site_name = f"robot0:{side}_pad"
         finger.add_site(
@@ -173,6 +171,7 @@ def franka_spec(layout: FrankaLayout = FrankaLayout()) -> mujoco.MjSpec:
     half = layout.cube_size / 2
     cube = world.add_body(name="object0", pos=[cx, cy, layout.cube_centre_height])
     cube.add_freejoint(name="object0:joint")
+    # condim 4 (torsional friction) keeps a cube pinched between two pads from spinning about their axis.
     cube.add_geom(name="object0", type=mujoco.mjtGeom.mjGEOM_BOX, size=[half] * 3, mass=0.1, rgba=[0.8, 0.05, 0.05, 1],
                   condim=4)
     cube.add_site(name="object0", size=[0.005] * 3, rgba=[0, 0, 0, 0])

@@ -1,4 +1,4 @@
-"""Sim2Real: camera sources, table calibration and the camera perception of the red cube."""
+"""Sim2Real: camera sources, table calibration, cube perception, robot backends (MuJoCo twin, Franka) and the loop."""
 
 from torchrl_cebp.sim2real.calibration import TableCalibration, aruco_dictionary, aruco_dictionary_names
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource, ImageFolderCamera, OpenCVCamera, check_frame
@@ -16,10 +16,15 @@ from torchrl_cebp.sim2real.perception import (
     draw_perception,
     fit_homography,
 )
+from torchrl_cebp.sim2real.policy import ScriptedPickPlace, load_policy
+from torchrl_cebp.sim2real.real_loop import ParallaxCorrection, RealLoopEnv, SafetyStatus, Workspace
+from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend, RobotState
 from torchrl_cebp.sim2real.synthetic import render_table_scene
+from torchrl_cebp.sim2real.twin import TWIN_CALIBRATION, MuJoCoTwinBackend, TwinCamera, TwinScene
 
 __all__ = [
     "RED_HSV_RANGES",
+    "TWIN_CALIBRATION",
     "Blob",
     "CameraLost",
     "ColorBlobDetector",
@@ -27,17 +32,29 @@ __all__ = [
     "CubeLocator",
     "CubePerception",
     "FrameSource",
+    "FrankyBackend",
     "HSVRange",
     "ImageFolderCamera",
     "MarkerDetector",
+    "MuJoCoTwinBackend",
     "OpenCVCamera",
+    "ParallaxCorrection",
     "PerceptionStatus",
+    "RealLoopEnv",
+    "RobotBackend",
+    "RobotState",
+    "SafetyStatus",
+    "ScriptedPickPlace",
     "TableCalibration",
+    "TwinCamera",
+    "TwinScene",
+    "Workspace",
     "apply_homography",
     "aruco_dictionary",
     "aruco_dictionary_names",
     "check_frame",
     "draw_perception",
     "fit_homography",
+    "load_policy",
     "render_table_scene",
 ]

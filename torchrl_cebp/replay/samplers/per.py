@@ -38,7 +38,7 @@ class PERSampler(PrioritizedSampler):
         ...                             priority_key="td_error")
         >>> _ = rb.extend(episodes)
         >>> batch = rb.sample()
-        >>> batch.set("td_error", torch.rand(4))
+        >>> _ = batch.set("td_error", torch.rand(4))
         >>> rb.update_tensordict_priority(batch)
     """
 
