@@ -19,10 +19,17 @@ RELEASED_WORKSPACES: dict[str, tuple[tuple[float, float, float], tuple[float, fl
     "pick_place": ((1.05, 0.4, 0.419), (1.55, 1.1, float("inf"))),
     "push": ((1.05, 0.4, 0.4), (1.55, 1.11, float("inf"))),
     "slide": ((0.7, 0.3, 0.4), (1.95, 1.2, float("inf"))),
+    # No released code for the Franka task: no workspace mask.
+    "franka_pick_place": ((-float("inf"),) * 3, (float("inf"),) * 3),
 }
 # Paper defaults per task: (k, temperature); the released code's k per task.
-PAPER_PARAMETERS = {"pick_place": (100.0, 0.01), "push": (100.0, 0.01), "slide": (100.0, 5.0)}
-RELEASED_K = {"pick_place": 0.1, "push": 0.1, "slide": 0.05}
+PAPER_PARAMETERS = {
+    "pick_place": (100.0, 0.01),
+    "push": (100.0, 0.01),
+    "slide": (100.0, 5.0),
+    "franka_pick_place": (100.0, 0.01),  # the Sim2Real policy: PickAndPlace's values
+}
+RELEASED_K = {"pick_place": 0.1, "push": 0.1, "slide": 0.05, "franka_pick_place": 0.1}
 RELEASED_MIN_EPISODES_FOR_WEIGHTS = 256
 
 
@@ -45,9 +52,10 @@ class CEBPSampler(EpisodePrioritySampler):
     Touch is only used here, to prioritise replay: the policy never sees it.
 
     Args:
-        task: ``"pick_place"``, ``"push"`` or ``"slide"``; selects the documented
-            defaults (paper: k=100, T=0.01, or T=5 for slide; released: its k and
-            workspace box).
+        task: ``"pick_place"``, ``"push"``, ``"slide"`` or ``"franka_pick_place"``;
+            selects the documented defaults (paper: k=100, T=0.01, or T=5 for slide;
+            released: its k and workspace box; the Franka task takes PickAndPlace's
+            values and no workspace mask).
         form: ``"paper"`` (default) or ``"released"``.
         scale: the sigmoid's ``k`` in the paper form (default per task).
         temperature: the sigmoid's ``T`` in the paper form (default per task).
