@@ -29,7 +29,7 @@ def _checkpoint_env(checkpoint: Path) -> tuple[str, str]:
 def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -> float:
     """Fraction of ``episodes`` deterministic episodes that end within the goal threshold."""
     from torchrl_cebp.envs import make_env
-    from torchrl_cebp.sim2real.policy import load_policy
+    from torchrl_cebp.training import load_policy
 
     task, goal_space = _checkpoint_env(Path(checkpoint))
     policy = load_policy(checkpoint)
@@ -51,7 +51,7 @@ def record_video(
     import imageio.v3 as iio
 
     from torchrl_cebp.envs import make_env
-    from torchrl_cebp.sim2real.policy import load_policy
+    from torchrl_cebp.training import load_policy
 
     path = Path(path)
     if path.suffix not in VIDEO_SUFFIXES:

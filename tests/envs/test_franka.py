@@ -76,3 +76,13 @@ def test_touch_only_while_holding_the_cube(env):
         assert (touch > 0).all(), touch
     assert obs["achieved_goal"][2] > cube[2] + 0.12  # lifted with the gripper
     assert np.linalg.norm(obs["observation"][6:9]) < 0.02  # still between the fingers
+
+
+def test_make_env_gives_the_franka_task_as_a_torchrl_env():
+    from torchrl.envs.utils import check_env_specs
+
+    from torchrl_cebp.envs import make_env
+
+    check_env_specs(make_env(FRANKA_TASK, num_envs=2))
+    td = make_env(FRANKA_TASK, seed=0).rollout(100)
+    assert td["next", "touch"].shape == (100, 2) and td["next", "truncated"][-1].item()

@@ -13,7 +13,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 from torchrl.envs.utils import check_env_specs, step_mdp
 
-from torchrl_cebp.envs import GOAL_SPACES, TASKS, gym_id, make_env, make_touch_fetch
+from torchrl_cebp.envs import ALL_TASKS, GOAL_SPACES, TASKS, gym_id, make_env, make_touch_fetch
 
 gym.register_envs(gymnasium_robotics)
 GYMNASIUM_IDS = {"pick_place": "FetchPickAndPlace-v4", "push": "FetchPush-v4", "slide": "FetchSlide-v4"}
@@ -102,7 +102,7 @@ def test_seeds_make_resets_reproducible():
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "valid"), [({"task": "reach"}, TASKS), ({"task": "push", "goal_space": "huge"}, GOAL_SPACES)]
+    ("kwargs", "valid"), [({"task": "reach"}, ALL_TASKS), ({"task": "push", "goal_space": "huge"}, GOAL_SPACES)]
 )
 def test_bad_names_raise_listing_valid_ones(kwargs, valid):
     with pytest.raises(ValueError) as error:

@@ -1,4 +1,4 @@
-"""Touch-sensing Fetch PickAndPlace, Push and Slide as gymnasium and TorchRL envs.
+"""Touch-sensing Fetch PickAndPlace, Push, Slide and a Franka pick-and-place as gymnasium and TorchRL envs.
 
 Example:
     >>> from torchrl_cebp.envs import make_env
@@ -9,13 +9,14 @@ Example:
 from torchrl_cebp.envs.franka import FRANKA_TASK, FrankaPickPlaceEnv, make_franka
 from torchrl_cebp.envs.franka import register as register_franka
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, TASKS
-from torchrl_cebp.envs.torchrl_env import TouchFetchEnv, make_env
+from torchrl_cebp.envs.torchrl_env import ALL_TASKS, TouchFetchEnv, make_env, make_goal_env
 from torchrl_cebp.envs.touch_fetch import gym_id, make_touch_fetch, register
 
 register()
 register_franka()
 
 __all__ = [
+    "ALL_TASKS",
     "FRANKA_TASK",
     "GOAL_SPACES",
     "TASKS",
@@ -24,5 +25,6 @@ __all__ = [
     "gym_id",
     "make_env",
     "make_franka",
+    "make_goal_env",
     "make_touch_fetch",
 ]

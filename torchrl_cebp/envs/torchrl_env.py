@@ -9,7 +9,25 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from torchrl_cebp.envs.franka import FRANKA_TASK, make_franka
+from torchrl_cebp.envs.goal_spaces import TASKS
 from torchrl_cebp.envs.touch_fetch import make_touch_fetch
+
+ALL_TASKS: tuple[str, ...] = (*TASKS, FRANKA_TASK)
+
+
+def make_goal_env(task: str, goal_space: str = "standard", **kwargs):
+    """The gymnasium touch-sensing goal env of any task, Fetch or Franka (``kwargs`` go to gymnasium-robotics).
+
+    Example:
+        >>> make_goal_env("franka_pick_place").max_episode_steps
+        100
+    """
+    if task == FRANKA_TASK:
+        return make_franka(goal_space, **kwargs)
+    if task not in TASKS:
+        raise ValueError(f"Unknown task {task!r}; valid tasks: {', '.join(ALL_TASKS)}")
+    return make_touch_fetch(task, goal_space, **kwargs)
 
 _OBS_KEYS = ("observation", "achieved_goal", "desired_goal")
 
@@ -45,7 +63,7 @@ class TouchFetchEnv(EnvBase):
         batch_size = torch.Size([] if num_envs is None else [num_envs])
         super().__init__(device=device, batch_size=batch_size)
         render = {} if render_size is None else {"render_mode": "rgb_array", "width": render_size[0], "height": render_size[1]}
-        self._sims = [make_touch_fetch(task, goal_space, **render) for _ in range(max(1, batch_size.numel()))]
+        self._sims = [make_goal_env(task, goal_space, **render) for _ in range(max(1, batch_size.numel()))]
         first = self._sims[0]
         self.task = task
         self.goal_space = goal_space
@@ -168,7 +186,9 @@ def make_env(
     num_envs: int | None = None,
     render_size: tuple[int, int] | None = None,
 ) -> EnvBase:
-    """The TorchRL env of ``task`` (``pick_place``, ``push``, ``slide``) under ``goal_space`` (``standard``, ``extended``).
+    """The TorchRL env of ``task`` (``pick_place``, ``push``, ``slide``, ``franka_pick_place``) under ``goal_space``.
+
+    Fetch tasks have the ``standard`` and ``extended`` goal spaces; the Franka task only ``standard``.
 
     ``num_envs=n`` gives one env of batch size ``[n]`` stepping ``n`` simulations (seeded
     ``seed``, ``seed + 1``, ...); ``render_size=(width, height)`` enables ``env.render()``. Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.

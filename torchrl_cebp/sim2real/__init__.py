@@ -16,7 +16,7 @@ from torchrl_cebp.sim2real.perception import (
     draw_perception,
     fit_homography,
 )
-from torchrl_cebp.sim2real.policy import ScriptedPickPlace, load_policy
+from torchrl_cebp.sim2real.policy import ScriptedPickPlace
 from torchrl_cebp.sim2real.real_loop import ParallaxCorrection, RealLoopEnv, SafetyStatus, Workspace
 from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend, RobotState
 from torchrl_cebp.sim2real.synthetic import render_table_scene
@@ -55,6 +55,5 @@ __all__ = [
     "check_frame",
     "draw_perception",
     "fit_homography",
-    "load_policy",
     "render_table_scene",
 ]

@@ -7,6 +7,9 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from tensordict.nn import TensorDictSequential
+
+from torchrl_cebp.agents import ObsGoalNormalizer, make_actor
 
 CHECKPOINT_NAME = "checkpoint.pt"
 
@@ -51,3 +54,35 @@ def set_rng_state(state: dict[str, Any]) -> None:
     torch.set_rng_state(state["torch"])
     if "cuda" in state and torch.cuda.is_available():
         torch.cuda.set_rng_state_all(state["cuda"])
+
+
+_ACTOR_PREFIX = "actor_network_params."
+
+
+def load_policy(checkpoint: str | Path, obs_dim: int = 25, goal_dim: int = 3, action_dim: int = 4) -> TensorDictSequential:
+    """The deterministic policy (normaliser, then actor) of a checkpoint written by ``torchrl_cebp.training``.
+
+    ``checkpoint`` is the ``checkpoint.pt`` file or the run directory holding it. The actor's weights
+    are the loss's ``actor_network_params`` (not the delayed target copy) and its hidden sizes come
+    from the checkpoint's config.
+
+    Example:
+        >>> policy = load_policy("runs/franka_pick_place-standard/cebp/default/seed0")  # doctest: +SKIP
+        >>> policy(env.reset())["action"]  # doctest: +SKIP
+    """
+    path = Path(checkpoint)
+    if path.is_dir():
+        path = path / CHECKPOINT_NAME
+    if not path.is_file():
+        raise FileNotFoundError(f"No checkpoint at {str(path)!r} (expected a {CHECKPOINT_NAME} or a run directory).")
+    state = torch.load(path, map_location="cpu", weights_only=True)
+    missing = {"config", "loss", "normalizer"} - set(state)
+    if missing:
+        raise ValueError(f"{str(path)!r} is not a training checkpoint: it lacks {sorted(missing)}.")
+    normalizer = ObsGoalNormalizer(obs_dim, goal_dim)
+    normalizer.load_state_dict(state["normalizer"])
+    actor = make_actor(obs_dim + goal_dim, action_dim, state["config"]["agent"]["hidden"])
+    actor.load_state_dict(
+        {key.removeprefix(_ACTOR_PREFIX): value for key, value in state["loss"].items() if key.startswith(_ACTOR_PREFIX)}
+    )
+    return TensorDictSequential(normalizer, actor).eval()

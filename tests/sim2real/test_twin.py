@@ -1,0 +1,161 @@
+"""The digital twin and the camera -> perception -> robot loop: accuracy, a full pick, and the safety rules."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from torchrl.envs.utils import check_env_specs, step_mdp
+
+from torchrl_cebp.sim2real import (
+    TWIN_CALIBRATION,
+    CubeLocator,
+    CubePerception,
+    MuJoCoTwinBackend,
+    ParallaxCorrection,
+    RealLoopEnv,
+    SafetyStatus,
+    ScriptedPickPlace,
+    TableCalibration,
+    TwinCamera,
+    Workspace,
+)
+from torchrl_cebp.training import load_policy
+from torchrl_cebp.sim2real.__main__ import main, parse_args
+
+
+@pytest.fixture(scope="module")
+def twin() -> tuple[MuJoCoTwinBackend, TwinCamera]:
+    backend = MuJoCoTwinBackend(seed=0)
+    return backend, TwinCamera(backend)
+
+
+def make_loop(backend: MuJoCoTwinBackend, camera: TwinCamera, **kwargs) -> RealLoopEnv:
+    locator = CubeLocator(backend.calibration)
+    parallax = ParallaxCorrection(backend.scene.camera_pos, locator.cube_size / 2)
+    return RealLoopEnv(backend, camera, CubePerception(locator), parallax=parallax, **kwargs)
+
+
+@pytest.fixture
+def intact_twin(twin):
+    """The shared twin with every marker on the table and the camera connected (tests break them)."""
+    backend, camera = twin
+    camera.lost = False
+    for marker_id in TWIN_CALIBRATION.marker_ids:
+        backend.env.model.geom(f"aruco_{marker_id}").pos[2] = TWIN_CALIBRATION.table_height + 0.0005
+    return twin
+
+
+@pytest.fixture
+def loop(intact_twin):
+    backend, camera = intact_twin
+    env = make_loop(backend, camera, goal=np.array([0.5, 0.0, 0.2]))
+    env.set_seed(0)
+    return env
+
+
+def test_calibration_read_from_the_model(twin, tmp_path):
+    backend, _ = twin
+    assert backend.calibration == TWIN_CALIBRATION
+    out = tmp_path / "table.yaml"
+    assert main(["calibrate", "backend=sim", f"out={out}"]) == 0
+    assert TableCalibration.load(out) == TWIN_CALIBRATION
+
+
+def test_perception_recovers_cube_within_1cm(intact_twin):
+    backend, camera = intact_twin
+    locator = CubeLocator(backend.calibration)
+    parallax = ParallaxCorrection(backend.scene.camera_pos, locator.cube_size / 2)
+    errors = []
+    for seed in range(8):
+        backend._seed = seed
+        backend.reset()
+        result = locator.locate(camera.read())
+        assert result.ok, result.reason
+        errors.append(np.linalg.norm(parallax(result.position) - backend.cube_position()))
+    assert max(errors) < 0.01, errors
+
+
+def test_specs(loop):
+    check_env_specs(loop)
+
+
+def test_scripted_policy_picks_through_camera_perception_robot(loop, twin):
+    backend, _ = twin
+    td = loop.rollout(40, ScriptedPickPlace(), break_when_any_done=False)
+    assert (td["next", "safety_status"] == SafetyStatus.OK).all()
+    assert bool(td["next", "is_success"][-1])
+    goal = td["desired_goal"][-1].numpy()
+    assert np.linalg.norm(backend.cube_position() - goal) < loop.layout.distance_threshold
+    assert (backend.touch > 0).all()  # held in the air, not resting there
+
+
+def test_markers_hidden_holds_still_with_reason(loop, twin):
+    backend, _ = twin
+    td = loop.reset()
+    for marker_id in (1, 2):
+        backend.env.model.geom(f"aruco_{marker_id}").pos[2] = -0.1  # under the table top: out of view
+    td = loop.step(td.set("action", torch.tensor([1.0, 0.0, 0.0, 1.0])))
+    nxt = td["next"]
+    assert nxt["safety_status"].item() == SafetyStatus.MARKERS and not nxt["perception_ok"].item()
+    assert torch.isnan(nxt["observation"][3:9]).all() and torch.isnan(nxt["achieved_goal"]).all()
+    before = backend.state().grip_pos.copy()
+    td = loop.step(step_mdp(td).set("action", torch.tensor([1.0, 1.0, 1.0, 1.0])))
+    np.testing.assert_allclose(backend.state().grip_pos, before, atol=2e-3)
+    assert td["next", "safety_status"].item() == SafetyStatus.MARKERS
+
+
+def test_command_outside_workspace_is_clamped(intact_twin):
+    backend, camera = intact_twin
+    high = (0.55, 0.3, 0.5)
+    env = make_loop(backend, camera, workspace=Workspace(low=(0.3, -0.3, 0.01), high=high, max_step=0.05))
+    td = env.reset()
+    for _ in range(4):
+        td = env.step(td.set("action", torch.tensor([1.0, 0.0, 0.0, 1.0])))
+        td = step_mdp(td)
+    assert td["clamped"].item()
+    assert backend.state().grip_pos[0] <= high[0] + 0.005
+
+
+def test_camera_lost_stops_robot_and_ends_episode(loop, twin):
+    backend, camera = twin
+    td = loop.reset()
+    camera.lost = True
+    td = loop.step(td.set("action", torch.tensor([0.0, 0.0, 0.5, 1.0])))
+    nxt = td["next"]
+    assert nxt["safety_status"].item() == SafetyStatus.CAMERA_LOST
+    assert nxt["terminated"].item() and nxt["done"].item()
+    assert backend.stopped
+    with pytest.raises(RuntimeError, match="stopped"):
+        backend.move(np.zeros(3), 1.0)
+
+
+def test_cli_rejects_bad_values():
+    with pytest.raises(ValueError, match="backend must be one of"):
+        parse_args(["run", "backend=ur5", "policy=scripted"])
+    with pytest.raises(ValueError, match="Bad value for episodes"):
+        parse_args(["run", "episodes=many", "policy=scripted"])
+    with pytest.raises(ValueError, match="checkpoint=PATH"):
+        parse_args(["run"])
+    with pytest.raises(ValueError, match="needs out="):
+        parse_args(["calibrate"])
+
+
+def test_load_policy_reads_the_trainer_checkpoint(tmp_path):
+    from tensordict import TensorDict
+
+    from torchrl_cebp.agents import HERDDPGLoss, ObsGoalNormalizer, make_actor, make_critic
+    from torchrl_cebp.training.checkpoint import save_checkpoint
+
+    hidden = [16, 16]
+    loss = HERDDPGLoss(make_actor(28, 4, hidden), make_critic(28, 4, hidden), gamma=0.98, action_l2=1.0)
+    normalizer = ObsGoalNormalizer(25, 3)
+    normalizer.update(TensorDict(observation=torch.randn(64, 25), desired_goal=torch.randn(64, 3), batch_size=[64]))
+    state = {"config": {"agent": {"hidden": hidden}}, "loss": loss.state_dict(), "normalizer": normalizer.state_dict()}
+    save_checkpoint(state, tmp_path)
+
+    policy = load_policy(tmp_path)
+    obs = TensorDict(observation=torch.randn(25), desired_goal=torch.randn(3))
+    with loss.actor_network_params.to_module(loss.actor_network):
+        expected = loss.actor_network(normalizer(obs.clone()))["action"]
+    torch.testing.assert_close(policy(obs)["action"], expected)

@@ -1,0 +1,268 @@
+"""The camera -> perception -> robot loop as a TorchRL env, with the policy's Fetch-layout observation.
+
+Each step checks that the observation the action was computed from was valid before anything moves:
+markers missing or cube not found -> the robot holds still and ``safety_status`` says why; a displacement
+outside the workspace box or longer than ``max_step`` is clamped (``clamped``); a lost camera stops the
+robot and ends the episode (``safety_status`` = camera lost, ``terminated``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from torchrl_cebp.envs.franka import FrankaLayout, sample_goal
+from torchrl_cebp.sim2real.camera import CameraLost, FrameSource
+from torchrl_cebp.sim2real.perception import CubePerception, PerceptionStatus
+from torchrl_cebp.sim2real.robot import RobotBackend, RobotState
+
+__all__ = ["ParallaxCorrection", "RealLoopEnv", "SafetyStatus", "Workspace"]
+
+
+class SafetyStatus(IntEnum):
+    """Why a step did (0) or did not move the robot; written as ``safety_status``."""
+
+    OK = 0
+    MARKERS = 1  # fewer than 4 calibrated markers visible
+    CUBE = 2  # no cube in the image and none in the gripper
+    CAMERA_LOST = 3  # no frame: robot stopped, episode over
+    INVALID_ACTION = 4  # NaN or inf in the action
+
+    @property
+    def reason(self) -> str:
+        """``"ok"``, ``"markers"``, ``"cube"``, ``"camera_lost"`` or ``"invalid_action"``."""
+        return self.name.lower()
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """The box the end effector may reach and the longest displacement one step may command (robot frame).
+
+    Example:
+        >>> ws = Workspace(low=(0.3, -0.2, 0.0), high=(0.7, 0.2, 0.5), max_step=0.05)
+        >>> ws.clamp(np.array([0.69, 0.0, 0.2]), np.array([0.05, 0.0, 0.0])).round(3).tolist()
+        [0.01, 0.0, 0.0]
+    """
+
+    low: tuple[float, float, float] = (0.3, -0.3, 0.01)
+    high: tuple[float, float, float] = (0.8, 0.3, 0.5)
+    max_step: float = 0.05
+
+    def clamp(self, position: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """``delta`` limited to ``max_step`` per axis and so that ``position + delta`` stays in the box."""
+        delta = np.clip(delta, -self.max_step, self.max_step)
+        return np.clip(position + delta, self.low, self.high) - position
+
+
+class ParallaxCorrection:
+    """Moves a table-plane position to where a point ``height`` above the table really is.
+
+    :class:`~torchrl_cebp.sim2real.perception.CubeLocator` maps the cube's outline onto the table plane;
+    seen obliquely, its top and sides land further from the camera than the cube is. Along the camera
+    ray the point at ``height`` lies ``1 - height / camera_z`` of the way from the camera to its
+    table-plane image.
+
+    Example:
+        >>> fix = ParallaxCorrection(camera_position=(1.0, 0.0, 1.0), height=0.5, table_height=0.0)
+        >>> fix(np.array([0.0, 0.0, 0.5])).tolist()
+        [0.5, 0.0, 0.5]
+    """
+
+    def __init__(self, camera_position: tuple[float, float, float], height: float, table_height: float = 0.0) -> None:
+        self.camera = np.asarray(camera_position, np.float64)
+        self.scale = 1.0 - height / (self.camera[2] - table_height)
+
+    def __call__(self, position: np.ndarray) -> np.ndarray:
+        out = np.asarray(position, np.float64).copy()
+        out[:2] = self.camera[:2] + (out[:2] - self.camera[:2]) * self.scale
+        return out
+
+
+def fetch_observation(state: RobotState, cube: np.ndarray, previous: tuple[RobotState, np.ndarray] | None, dt: float) -> np.ndarray:
+    """The 25-D Fetch observation from the robot state and the cube position (rotation unknown: zero).
+
+    Velocities are per-step displacements, as Fetch multiplies them by the step time ``dt``; the cube's
+    comes from the change since ``previous`` (zero on the first step) relative to the gripper's.
+
+    Example:
+        >>> state = RobotState(np.zeros(3), np.zeros(3), np.full(2, 0.04), np.zeros(2))
+        >>> fetch_observation(state, np.array([0.1, 0.0, 0.0]), None, 0.04).shape
+        (25,)
+    """
+    grip_velp = state.grip_vel * dt
+    if previous is None:
+        cube_velp = np.zeros(3)
+    else:
+        cube_velp = (cube - previous[1]) - (state.grip_pos - previous[0].grip_pos)
+    return np.concatenate(
+        [state.grip_pos, cube, cube - state.grip_pos, state.finger_pos, np.zeros(3), cube_velp, np.zeros(3),
+         grip_velp, state.finger_vel * dt]
+    ).astype(np.float32)
+
+
+class RealLoopEnv(EnvBase):
+    """Camera + :class:`CubePerception` + robot backend, assembled into the policy's keys.
+
+    Root and ``"next"``: float32 ``observation`` [25], ``achieved_goal`` [3] (the perceived cube),
+    ``desired_goal`` [3], ``cube_position`` [3] (NaN when not perceived), bool ``perception_ok``,
+    int64 ``perception_status`` and ``safety_status`` (:class:`SafetyStatus`), bool ``clamped``,
+    ``is_success``; ``"next"`` adds ``reward`` and ``done``/``terminated``/``truncated``. When the cube
+    is not perceived the cube entries of ``observation`` are NaN, so nothing downstream can act on a stale one.
+
+    While the gripper is closed on something the width of the cube, the cube is where the gripper is:
+    a lifted cube is off the table plane the camera measures on.
+
+    Args:
+        backend: the robot.
+        camera: frame source (BGR).
+        perception: the calibrated cube perception (reads ``"pixels"``).
+        workspace: end-effector box and max step.
+        layout: goal space, success threshold, episode length and cube size (the Franka sim's).
+        parallax: optional correction of the perceived cube position for an oblique camera.
+        goal: a fixed goal; ``None`` samples one per episode like the simulator.
+        dt: the simulator's step time, to scale velocities as Fetch does.
+
+    Example:
+        >>> from torchrl_cebp.sim2real import CubeLocator
+        >>> from torchrl_cebp.sim2real.twin import MuJoCoTwinBackend, TwinCamera
+        >>> backend = MuJoCoTwinBackend(seed=0)
+        >>> env = RealLoopEnv(backend, TwinCamera(backend), CubePerception(CubeLocator(backend.calibration)))
+        >>> env.rollout(2)["next", "observation"].shape
+        torch.Size([2, 25])
+    """
+
+    def __init__(
+        self,
+        backend: RobotBackend,
+        camera: FrameSource,
+        perception: CubePerception,
+        workspace: Workspace = Workspace(),
+        layout: FrankaLayout = FrankaLayout(),
+        parallax: Callable[[np.ndarray], np.ndarray] | None = None,
+        goal: np.ndarray | None = None,
+        dt: float = 0.04,
+    ) -> None:
+        super().__init__(device="cpu", batch_size=torch.Size([]))
+        self.backend, self.camera, self.perception = backend, camera, perception
+        self.workspace, self.layout, self.parallax = workspace, layout, parallax
+        self.fixed_goal = None if goal is None else np.asarray(goal, np.float64)
+        self.dt = dt
+        self.max_episode_steps = layout.max_episode_steps
+        self._rng = np.random.default_rng()
+        self._goal = np.zeros(3)
+        self._previous: tuple[RobotState, np.ndarray] | None = None
+        self._steps = 0
+
+        def flag() -> Categorical:
+            return Categorical(2, (1,), dtype=torch.bool)
+
+        self.observation_spec = Composite(
+            observation=Unbounded((25,), dtype=torch.float32),
+            achieved_goal=Unbounded((3,), dtype=torch.float32),
+            desired_goal=Unbounded((3,), dtype=torch.float32),
+            cube_position=Unbounded((3,), dtype=torch.float32),
+            perception_ok=flag(),
+            perception_status=Categorical(len(PerceptionStatus), (1,), dtype=torch.int64),
+            safety_status=Categorical(len(SafetyStatus), (1,), dtype=torch.int64),
+            clamped=flag(),
+            is_success=flag(),
+        )
+        self.action_spec = Bounded(-1.0, 1.0, (4,), dtype=torch.float32)
+        self.reward_spec = Unbounded((1,), dtype=torch.float32)
+        self.done_spec = Composite(done=flag(), terminated=flag(), truncated=flag())
+
+    def _perceive(self, state: RobotState) -> tuple[np.ndarray, PerceptionStatus]:
+        frame = self.camera.read()
+        td = self.perception(TensorDict(pixels=torch.from_numpy(frame)))
+        status = PerceptionStatus(int(td["perception_status"]))
+        cube = td["cube_position"].numpy().astype(np.float64)
+        if status is PerceptionStatus.OK and self.parallax is not None:
+            cube = self.parallax(cube)
+        if status is not PerceptionStatus.MARKERS and self._in_gripper(state):
+            return state.grip_pos.copy(), PerceptionStatus.OK
+        return cube, status
+
+    def _in_gripper(self, state: RobotState) -> bool:
+        # Closed on the cube: narrower than open, wider than empty, and the cube was at the fingers last step.
+        width, size = state.gripper_width, self.layout.cube_size
+        near = self._previous is not None and np.linalg.norm(self._previous[1] - self._previous[0].grip_pos) < size / 2
+        return near and 0.6 * size < width < 1.2 * size
+
+    def _observe(self, safety: SafetyStatus, clamped: bool) -> dict[str, torch.Tensor]:
+        state = self.backend.state()
+        cube, status = self._perceive(state)
+        ok = status is PerceptionStatus.OK
+        if not ok:
+            cube = np.full(3, np.nan)
+            # PerceptionStatus and SafetyStatus share their codes for "markers" and "cube".
+            safety = SafetyStatus(int(status)) if safety is SafetyStatus.OK else safety
+        observation = fetch_observation(state, cube, self._previous if ok else None, self.dt)
+        self._previous = (state, cube) if ok else None
+        return self._pack(observation, cube, status, safety, clamped)
+
+    def _pack(
+        self, observation: np.ndarray, cube: np.ndarray, status: PerceptionStatus, safety: SafetyStatus, clamped: bool
+    ) -> dict[str, torch.Tensor]:
+        ok = status is PerceptionStatus.OK
+        success = bool(ok and np.linalg.norm(cube - self._goal) <= self.layout.distance_threshold)
+        achieved = torch.as_tensor(cube, dtype=torch.float32)
+        return {
+            "observation": torch.as_tensor(observation, dtype=torch.float32),
+            "achieved_goal": achieved,
+            "desired_goal": torch.as_tensor(self._goal, dtype=torch.float32),
+            "cube_position": achieved.clone(),
+            "perception_ok": torch.tensor([ok]),
+            "perception_status": torch.tensor([int(status)]),
+            "safety_status": torch.tensor([int(safety)]),
+            "clamped": torch.tensor([clamped]),
+            "is_success": torch.tensor([success]),
+        }
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        self.backend.reset()
+        self._goal = self.fixed_goal if self.fixed_goal is not None else sample_goal(self.layout, self._rng)
+        self._previous, self._steps = None, 0
+        out = self._observe(SafetyStatus.OK, False)
+        not_done = torch.zeros(1, dtype=torch.bool)
+        out.update(done=not_done, terminated=not_done.clone(), truncated=not_done.clone())
+        return TensorDict(out, batch_size=self.batch_size)
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        action = tensordict.get("action").detach().cpu().numpy().astype(np.float64)
+        self._steps += 1
+        clamped, safety = False, SafetyStatus.OK
+        if not bool(tensordict.get("perception_ok").all()):
+            safety = SafetyStatus(int(tensordict.get("perception_status")))
+            self.backend.hold()
+        elif not np.isfinite(action).all():
+            safety = SafetyStatus.INVALID_ACTION
+            self.backend.hold()
+        else:
+            wanted = np.clip(action[:3], -1.0, 1.0) * self.workspace.max_step
+            delta = self.workspace.clamp(self.backend.state().grip_pos, wanted)
+            clamped = bool(np.abs(delta - action[:3] * self.workspace.max_step).max() > 1e-9)
+            self.backend.move(delta, float(np.clip(action[3], -1.0, 1.0)))
+        truncated = torch.tensor([self._steps >= self.max_episode_steps])
+        try:
+            out = self._observe(safety, clamped)
+            terminated = torch.zeros(1, dtype=torch.bool)
+        except CameraLost:
+            self.backend.stop()
+            self._previous = None
+            out = self._pack(
+                np.full(25, np.nan), np.full(3, np.nan), PerceptionStatus.MARKERS, SafetyStatus.CAMERA_LOST, clamped
+            )
+            terminated = torch.ones(1, dtype=torch.bool)
+        out["reward"] = torch.tensor([0.0 if bool(out["is_success"]) else -1.0])
+        out.update(done=terminated | truncated, terminated=terminated, truncated=truncated)
+        return TensorDict(out, batch_size=self.batch_size)
+
+    def _set_seed(self, seed: int | None) -> None:
+        self._rng = np.random.default_rng(seed)

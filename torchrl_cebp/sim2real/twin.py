@@ -1,0 +1,222 @@
+"""The MuJoCo digital twin of the real setup: the Franka scene, ArUco markers on the table, a fixed camera.
+
+The markers are generated with ``cv2.aruco.generateImageMarker`` and written as PNG textures to a cache
+directory at run time, so the twin's camera images go through exactly the perception the real camera
+images go through.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import cv2
+import mujoco
+import numpy as np
+
+from torchrl_cebp.envs.franka import FrankaLayout, FrankaPickPlaceEnv
+from torchrl_cebp.sim2real.calibration import TableCalibration, aruco_dictionary
+from torchrl_cebp.sim2real.camera import FrameSource
+from torchrl_cebp.sim2real.robot import RobotBackend, RobotState
+
+__all__ = ["TWIN_CALIBRATION", "MuJoCoTwinBackend", "TwinCamera", "TwinScene", "marker_texture"]
+
+# Outside the cube's and the goal's x/y range (table centre +- 0.1), inside the table (centre +- 0.35 x 0.45).
+TWIN_CALIBRATION = TableCalibration(
+    {0: (0.3, -0.35), 1: (0.3, 0.35), 2: (0.75, 0.35), 3: (0.75, -0.35)}, "DICT_4X4_50", table_height=0.0
+)
+CAMERA_NAME = "sim2real_camera"
+# An ArUco marker needs a white quiet zone around its black border to be found.
+_QUIET_ZONE = 1.4
+
+
+def marker_texture(dictionary: str, marker_id: int, pixels: int = 140, cache_dir: str | Path | None = None) -> Path:
+    """A PNG of marker ``marker_id`` with a white quiet zone, written once to ``cache_dir`` (default: the temp dir).
+
+    Example:
+        >>> import cv2
+        >>> cv2.imread(str(marker_texture("DICT_4X4_50", 3))).shape
+        (140, 140, 3)
+    """
+    cache = Path(cache_dir) if cache_dir is not None else Path(tempfile.gettempdir()) / "torchrl_cebp_aruco"
+    path = cache / f"{dictionary}_{marker_id}_{pixels}.png"
+    if not path.exists():
+        cache.mkdir(parents=True, exist_ok=True)
+        side = round(pixels / _QUIET_ZONE)
+        image = np.full((pixels, pixels), 255, np.uint8)
+        offset = (pixels - side) // 2
+        image[offset : offset + side, offset : offset + side] = cv2.aruco.generateImageMarker(
+            aruco_dictionary(dictionary), marker_id, side
+        )
+        # Write then rename, so a concurrent reader never sees half a PNG.
+        tmp = path.with_suffix(f".{os.getpid()}.png")
+        cv2.imwrite(str(tmp), cv2.cvtColor(image, cv2.COLOR_GRAY2BGR))
+        tmp.replace(path)
+    return path
+
+
+class TwinScene:
+    """Adds the markers of a calibration and a fixed camera to the Franka scene (a ``scene_hook``).
+
+    Args:
+        calibration: marker ids and robot-frame centres (``table_height`` is the table top).
+        marker_size: printed marker edge, black border included, metres.
+        camera_pos, camera_target: where the camera is and what it looks at (robot frame).
+        fovy: vertical field of view, degrees.
+        image_size: ``(height, width)`` of the rendered frames.
+
+    Example:
+        >>> env = FrankaPickPlaceEnv(scene_hook=TwinScene(TWIN_CALIBRATION))
+        >>> env.model.camera(CAMERA_NAME).id
+        0
+    """
+
+    def __init__(
+        self,
+        calibration: TableCalibration = TWIN_CALIBRATION,
+        marker_size: float = 0.08,
+        camera_pos: tuple[float, float, float] = (1.25, 0.0, 0.95),
+        camera_target: tuple[float, float, float] = (0.5, 0.0, 0.0),
+        fovy: float = 50.0,
+        image_size: tuple[int, int] = (360, 480),
+    ) -> None:
+        self.calibration = calibration
+        self.marker_size = marker_size
+        self.camera_pos = np.asarray(camera_pos, np.float64)
+        self.camera_target = np.asarray(camera_target, np.float64)
+        self.fovy = fovy
+        self.image_size = image_size
+
+    def __call__(self, spec: mujoco.MjSpec) -> None:
+        half = self.marker_size * _QUIET_ZONE / 2
+        for marker_id, (x, y) in self.calibration.marker_positions.items():
+            name = f"aruco_{marker_id}"
+            png = marker_texture(self.calibration.aruco_dictionary, marker_id)
+            spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D, file=str(png))
+            material = spec.add_material(name=name)
+            material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = name
+            spec.worldbody.add_geom(
+                name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[half, half, 0.0005],
+                pos=[x, y, self.calibration.table_height + 0.0005], material=name, contype=0, conaffinity=0,
+            )
+        forward = self.camera_target - self.camera_pos
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, forward)
+        spec.worldbody.add_camera(
+            name=CAMERA_NAME, pos=self.camera_pos.tolist(), xyaxes=[*right, *up], fovy=self.fovy
+        )
+        spec.visual.global_.offheight = max(spec.visual.global_.offheight, self.image_size[0])
+        spec.visual.global_.offwidth = max(spec.visual.global_.offwidth, self.image_size[1])
+
+
+class MuJoCoTwinBackend(RobotBackend):
+    """The Franka pick-and-place simulation as a robot backend, with the markers and camera of :class:`TwinScene`.
+
+    ``move`` is one simulator step (20 physics substeps, 40 ms) of the Fetch-style action; ``hold`` is
+    a step that stays put with the last gripper command. After :meth:`stop` the arm refuses to move
+    until :meth:`reset`, as a real robot after a stop would.
+
+    Args:
+        scene: markers and camera.
+        layout: the Franka scene geometry.
+        seed: seeds the cube placement.
+
+    Example:
+        >>> backend = MuJoCoTwinBackend(seed=0)
+        >>> backend.reset()
+        >>> backend.move(np.array([0.0, 0.0, 0.02]), gripper=1.0)
+        >>> round(float(backend.state().grip_pos[2]), 2)
+        0.24
+    """
+
+    def __init__(
+        self, scene: TwinScene | None = None, layout: FrankaLayout = FrankaLayout(), seed: int | None = None
+    ) -> None:
+        self.scene = TwinScene() if scene is None else scene
+        self.env = FrankaPickPlaceEnv(layout=layout, scene_hook=self.scene)
+        self.layout = layout
+        self._seed = seed
+        self._gripper = 1.0
+        self.stopped = False
+
+    @property
+    def max_step(self) -> float:
+        """The largest displacement one :meth:`move` can make (Fetch's action scale, which the env keeps)."""
+        return 0.05
+
+    @property
+    def calibration(self) -> TableCalibration:
+        """The markers as placed in the model (what the hardware calibration would measure)."""
+        model = self.env.model
+        positions = {
+            marker_id: tuple(model.geom(f"aruco_{marker_id}").pos[:2]) for marker_id in self.scene.calibration.marker_ids
+        }
+        return TableCalibration(positions, self.scene.calibration.aruco_dictionary, self.layout.table_height)
+
+    def reset(self) -> None:
+        self.env.reset(seed=self._seed)
+        self._seed = None  # seeds the first episode only; later ones continue the stream
+        self._gripper = 1.0
+        self.stopped = False
+
+    def state(self) -> RobotState:
+        obs = self.env._get_obs()["observation"]
+        dt = self.env.dt
+        # Fetch's observation stores velocities multiplied by the step time.
+        return RobotState(grip_pos=obs[0:3], grip_vel=obs[20:23] / dt, finger_pos=obs[9:11], finger_vel=obs[23:25] / dt)
+
+    def move(self, delta_xyz: np.ndarray, gripper: float) -> None:
+        if self.stopped:
+            raise RuntimeError("The twin robot was stopped; reset() it before moving again.")
+        self._gripper = float(gripper)
+        action = np.append(np.clip(np.asarray(delta_xyz) / self.max_step, -1.0, 1.0), self._gripper)
+        self.env.step(action.astype(np.float32))
+
+    def hold(self) -> None:
+        if not self.stopped:
+            self.env.step(np.array([0.0, 0.0, 0.0, self._gripper], np.float32))
+
+    def stop(self) -> None:
+        self.stopped = True
+
+    def cube_position(self) -> np.ndarray:
+        """Ground truth the real setup does not have: the simulated cube's centre."""
+        return self.env._utils.get_site_xpos(self.env.model, self.env.data, "object0").copy()
+
+    @property
+    def touch(self) -> np.ndarray:
+        """Finger-pad touch of the last step (left, right)."""
+        return self.env.touch.copy()
+
+
+class TwinCamera(FrameSource):
+    """Renders the twin's fixed camera: BGR frames, like :class:`~torchrl_cebp.sim2real.camera.OpenCVCamera`'s.
+
+    Example:
+        >>> backend = MuJoCoTwinBackend(seed=0)
+        >>> backend.reset()
+        >>> TwinCamera(backend).read().shape
+        (360, 480, 3)
+    """
+
+    def __init__(self, backend: MuJoCoTwinBackend) -> None:
+        super().__init__(expected_size=backend.scene.image_size)
+        self.backend = backend
+        height, width = backend.scene.image_size
+        self._renderer = mujoco.Renderer(backend.env.model, height, width)
+        self.lost = False  # set to simulate an unplugged camera
+
+    def _grab(self) -> np.ndarray | None:
+        if self.lost:
+            return None
+        self._renderer.update_scene(self.backend.env.data, camera=CAMERA_NAME)
+        return cv2.cvtColor(self._renderer.render(), cv2.COLOR_RGB2BGR)
+
+    def close(self) -> None:
+        self._renderer.close()
+
+    def __repr__(self) -> str:
+        return f"TwinCamera({CAMERA_NAME!r})"
