@@ -27,9 +27,9 @@ from torchrl_cebp.sim2real.calibration import TableCalibration
 from torchrl_cebp.sim2real.camera import FrameSource, OpenCVCamera
 from torchrl_cebp.sim2real.perception import CubeLocator, CubePerception, draw_perception
 from torchrl_cebp.sim2real.policy import ScriptedPickPlace
-from torchrl_cebp.training import load_policy
 from torchrl_cebp.sim2real.real_loop import ParallaxCorrection, RealLoopEnv, SafetyStatus
 from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend
+from torchrl_cebp.training import load_policy
 
 _BACKENDS = ("sim", "franky")
 
