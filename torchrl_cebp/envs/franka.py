@@ -26,7 +26,7 @@ import numpy as np
 from gymnasium.utils import EzPickle
 from gymnasium_robotics.envs.fetch import MujocoFetchEnv
 
-from torchrl_cebp.envs.touch_fetch import TOUCH_SENSORS
+from torchrl_cebp.envs.touch import TouchReporting, add_touch_pad
 
 __all__ = [
     "FRANKA_ASSETS",
@@ -58,7 +58,6 @@ GRIP_OFFSET = 0.24
 # Inner pad of each finger (finger frame): the capsules' inner surface, from fingertip to knuckle.
 _PAD_HALF_SIZE = (0.02, 0.006, 0.0325)
 _PAD_POS = (0.0, 0.0, 0.0625)
-_PAD_RGBA = (0.1, 0.9, 0.2, 0.6)
 # Name, body, and the local y direction pointing at the other finger.
 _FINGERS = (("left", "panda0_leftfinger", -1.0), ("right", "panda0_rightfinger", 1.0))
 
@@ -138,7 +137,7 @@ def franka_spec(layout: FrankaLayout = FrankaLayout()) -> mujoco.MjSpec:
 
     hand = spec.body(HAND_BODY)
     hand.add_site(name="robot0:grip", pos=[0, 0, GRIP_OFFSET], size=[0.01] * 3, rgba=[0, 0, 0, 0])
-    for (side, body_name, inward), sensor_name in zip(_FINGERS, TOUCH_SENSORS):
+    for side, body_name, inward in _FINGERS:
         finger = spec.body(body_name)
         # A flat pad like the real Panda's rubber one replaces the kitchen model's crossed capsules, which
         # squeeze a grasped box up and out of the fingers when the hand lifts.
@@ -149,14 +148,7 @@ def franka_spec(layout: FrankaLayout = FrankaLayout()) -> mujoco.MjSpec:
             name=f"robot0:{side}_pad_geom", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.012, 0.004, 0.03],
             pos=[0.0, -inward * 0.004, _PAD_POS[2]], friction=[1.0, 0.005, 0.0001], condim=4,
         )
-        site_name = f"robot0:{side}_pad"
-        finger.add_site(
-            name=site_name, type=mujoco.mjtGeom.mjGEOM_BOX, size=list(_PAD_HALF_SIZE), pos=list(_PAD_POS),
-            rgba=list(_PAD_RGBA),
-        )
-        spec.add_sensor(
-            name=sensor_name, type=mujoco.mjtSensor.mjSENS_TOUCH, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=site_name
-        )
+        add_touch_pad(spec, body_name, side, _PAD_HALF_SIZE, _PAD_POS)
 
     world = spec.worldbody
     world.add_light(pos=[0.5, 0, 2.0], dir=[0, 0, -1], diffuse=[0.7] * 3, specular=[0.1] * 3, castshadow=False)
@@ -190,7 +182,7 @@ def franka_spec(layout: FrankaLayout = FrankaLayout()) -> mujoco.MjSpec:
 _DEFAULT_CAMERA = {"distance": 1.6, "azimuth": 150.0, "elevation": -25.0, "lookat": np.array([0.5, 0.0, 0.1])}
 
 
-class FrankaPickPlaceEnv(MujocoFetchEnv, EzPickle):
+class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
     """Franka Panda pick-and-place as a gymnasium goal env with Fetch's observation, goal and action layout.
 
     ``info["touch"]`` (also ``env.touch``) is each finger pad's touch averaged over the physics substeps.
@@ -244,9 +236,7 @@ class FrankaPickPlaceEnv(MujocoFetchEnv, EzPickle):
         self.model = spec.compile()
         self.data = self._mujoco.MjData(self.model)
         self._model_names = self._utils.MujocoModelNames(self.model)
-        self._touch_adr = np.array(
-            [self.model.sensor_adr[self.model.sensor(name).id] for name in TOUCH_SENSORS], dtype=np.int64
-        )
+        self.locate_touch_sensors()
         self.model.vis.global_.offwidth = max(self.width, self.model.vis.global_.offwidth)
         self.model.vis.global_.offheight = max(self.height, self.model.vis.global_.offheight)
         self._env_setup(initial_qpos=self.initial_qpos)
@@ -290,7 +280,7 @@ class FrankaPickPlaceEnv(MujocoFetchEnv, EzPickle):
         for k in range(1, self.n_substeps + 1):
             self.data.mocap_pos[0] = self._mocap_start + self._mocap_delta * (k / self.n_substeps)
             self._mujoco.mj_step(self.model, self.data)
-            total += self.data.sensordata[self._touch_adr]
+            total += self.substep_touch()
         self.touch = total / self.n_substeps
 
     def _sample_goal(self) -> np.ndarray:
@@ -302,17 +292,6 @@ class FrankaPickPlaceEnv(MujocoFetchEnv, EzPickle):
 
     def _get_gripper_xpos(self) -> np.ndarray:
         return self.data.body(HAND_BODY).xpos
-
-    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
-        obs, reward, terminated, truncated, info = super().step(action)
-        info["touch"] = self.touch.copy()
-        return obs, reward, terminated, truncated, info
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        obs, info = super().reset(seed=seed, options=options)
-        self.touch = self.data.sensordata[self._touch_adr].copy()
-        info["touch"] = self.touch.copy()
-        return obs, info
 
 
 def make_franka(goal_space: str = "standard", **kwargs: Any) -> FrankaPickPlaceEnv:

@@ -22,12 +22,11 @@ from gymnasium_robotics.envs.fetch.push import MujocoFetchPushEnv
 from gymnasium_robotics.envs.fetch.slide import MujocoFetchSlideEnv
 
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, GoalSpace, get_goal_space
+from torchrl_cebp.envs.touch import TouchReporting, add_touch_pad
 
 # CPER's pad geometry; the inner side of the right finger is its local -y, of the left one +y.
 _PAD_HALF_SIZE = (0.037, 0.00795, 0.0145)
 _FINGERS = (("left", "robot0:l_gripper_finger_link", 1.0), ("right", "robot0:r_gripper_finger_link", -1.0))
-_PAD_RGBA = (0.1, 0.9, 0.2, 0.6)
-TOUCH_SENSORS: tuple[str, str] = ("robot0:left_touch", "robot0:right_touch")
 
 
 def touch_spec(model_path: str, table_half_size: tuple[float, float] | None = None) -> mujoco.MjSpec:
@@ -42,19 +41,8 @@ def touch_spec(model_path: str, table_half_size: tuple[float, float] | None = No
         2
     """
     spec = mujoco.MjSpec.from_file(model_path)
-    for (side, body_name, inward), sensor_name in zip(_FINGERS, TOUCH_SENSORS):
-        site_name = f"robot0:{side}_pad"
-        spec.body(body_name).add_site(
-            name=site_name,
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=list(_PAD_HALF_SIZE),
-            pos=[0.001, inward * _PAD_HALF_SIZE[1], 0.0],
-            rgba=list(_PAD_RGBA),
-            group=0,  # rendered by default
-        )
-        spec.add_sensor(
-            name=sensor_name, type=mujoco.mjtSensor.mjSENS_TOUCH, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=site_name
-        )
+    for side, body_name, inward in _FINGERS:
+        add_touch_pad(spec, body_name, side, _PAD_HALF_SIZE, (0.001, inward * _PAD_HALF_SIZE[1], 0.0))
     if table_half_size is not None:
         table = spec.body("table0")
         top = table.geoms[0]
@@ -63,7 +51,7 @@ def touch_spec(model_path: str, table_half_size: tuple[float, float] | None = No
     return spec
 
 
-class _TouchFetchMixin:
+class _TouchFetchMixin(TouchReporting):
     """Touch sensing and goal-space settings on top of a gymnasium-robotics ``MujocoFetch*Env``."""
 
     task: str
@@ -86,9 +74,7 @@ class _TouchFetchMixin:
         self.model = touch_spec(self.fullpath, self.space.table_half_size).compile()
         self.data = self._mujoco.MjData(self.model)
         self._model_names = self._utils.MujocoModelNames(self.model)
-        self._touch_adr = np.array(
-            [self.model.sensor_adr[self.model.sensor(name).id] for name in TOUCH_SENSORS], dtype=np.int64
-        )
+        self.locate_touch_sensors()
         self.model.vis.global_.offwidth = self.width
         self.model.vis.global_.offheight = self.height
         self._env_setup(initial_qpos=self.initial_qpos)
@@ -101,20 +87,8 @@ class _TouchFetchMixin:
         total = np.zeros(2)
         for _ in range(self.n_substeps):
             self._mujoco.mj_step(self.model, self.data)
-            total += self.data.sensordata[self._touch_adr]
+            total += self.substep_touch()
         self.touch = total / self.n_substeps
-
-    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
-        obs, reward, terminated, truncated, info = super().step(action)
-        info["touch"] = self.touch.copy()
-        return obs, reward, terminated, truncated, info
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
-        obs, info = super().reset(seed=seed, options=options)
-        # mj_forward in _reset_sim has evaluated the sensors at the reset state.
-        self.touch = self.data.sensordata[self._touch_adr].copy()
-        info["touch"] = self.touch.copy()
-        return obs, info
 
     def _reset_sim(self) -> bool:
         super()._reset_sim()

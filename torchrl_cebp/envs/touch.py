@@ -1,0 +1,79 @@
+"""Touch sensing shared by the Fetch and Franka tasks: pad sites with MuJoCo touch sensors, reported per step."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+TOUCH_SENSORS: tuple[str, str] = ("robot0:left_touch", "robot0:right_touch")
+PAD_RGBA = (0.1, 0.9, 0.2, 0.6)
+
+
+def add_touch_pad(
+    spec: mujoco.MjSpec,
+    body_name: str,
+    side: str,
+    half_size: tuple[float, float, float],
+    pos: tuple[float, float, float],
+) -> None:
+    """Adds a visible box site ``robot0:<side>_pad`` on ``body_name`` and a touch sensor ``robot0:<side>_touch`` on it.
+
+    A touch sensor reports the summed normal force of the contacts inside its site's volume.
+
+    Example:
+        >>> spec = mujoco.MjSpec()
+        >>> _ = spec.worldbody.add_body(name="finger")
+        >>> add_touch_pad(spec, "finger", "left", (0.01, 0.01, 0.01), (0, 0, 0))
+        >>> spec.compile().nsensor
+        1
+    """
+    site_name = f"robot0:{side}_pad"
+    spec.body(body_name).add_site(
+        name=site_name,
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=list(half_size),
+        pos=list(pos),
+        rgba=list(PAD_RGBA),
+        group=0,  # rendered by default
+    )
+    spec.add_sensor(
+        name=f"robot0:{side}_touch",
+        type=mujoco.mjtSensor.mjSENS_TOUCH,
+        objtype=mujoco.mjtObj.mjOBJ_SITE,
+        objname=site_name,
+    )
+
+
+class TouchReporting:
+    """Mixin for a gymnasium-robotics MuJoCo env whose model has the two pad sensors of :func:`add_touch_pad`.
+
+    ``touch`` (and ``info["touch"]``) holds ``[left, right]``: the mean over the physics substeps
+    after a step (the env's ``_mujoco_step`` calls :meth:`substep_touch`), the reading at the
+    reset state after a reset.
+    """
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    n_substeps: int
+    touch: np.ndarray
+
+    def locate_touch_sensors(self) -> None:
+        """Finds the sensors in the compiled model; call it once the model exists."""
+        self._touch_adr = np.array(
+            [self.model.sensor_adr[self.model.sensor(name).id] for name in TOUCH_SENSORS], dtype=np.int64
+        )
+
+    def substep_touch(self) -> np.ndarray:
+        return self.data.sensordata[self._touch_adr]
+
+    def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        obs, reward, terminated, truncated, info = super().step(action)
+        info["touch"] = self.touch.copy()
+        return obs, reward, terminated, truncated, info
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        obs, info = super().reset(seed=seed, options=options)
+        # mj_forward in _reset_sim has evaluated the sensors at the reset state.
+        self.touch = self.substep_touch().copy()
+        info["touch"] = self.touch.copy()
+        return obs, info
