@@ -137,3 +137,13 @@ class TestHERExploration:
         td = TensorDict({"action": torch.full((10, 4), 0.5)}, [10])
         with set_exploration_type(ExplorationType.DETERMINISTIC):
             assert (HERExploration()(td)["action"] == 0.5).all()
+
+    def test_own_generator_repeats_and_leaves_the_global_stream_alone(self):
+        def noisy(seed: int) -> torch.Tensor:
+            td = TensorDict({"action": torch.zeros(50, 4)}, [50])
+            return HERExploration(generator=torch.Generator().manual_seed(seed))(td)["action"]
+
+        torch.manual_seed(0)
+        before = torch.get_rng_state()
+        assert torch.equal(noisy(3), noisy(3)) and not torch.equal(noisy(3), noisy(4))
+        assert torch.equal(torch.get_rng_state(), before)

@@ -48,11 +48,14 @@ def test_tiny_run_writes_csv_and_checkpoint(tmp_path, sampler):
     assert {"loss", "normalizer", "actor_optim", "critic_optim", "replay", "rng"} <= set(state)
 
 
-def test_resume_repeats_the_uninterrupted_run(tmp_path):
-    # CEBP: the sampler's priorities and the IS weights must come back too
-    straight = rows(train(config("sampler=cebp"), tmp_path / "straight"))
-    train(config("sampler=cebp", "epochs=1"), tmp_path / "split")
-    resumed = rows(train(config("sampler=cebp", "resume=true"), tmp_path / "split"))
+@pytest.mark.parametrize("overlap", ["false", "true"])
+def test_resume_repeats_the_uninterrupted_run(tmp_path, overlap):
+    # CEBP: the sampler's priorities and the IS weights must come back too; with overlap, the
+    # worker process's env and exploration streams too
+    run = ("sampler=cebp", f"overlap_collection={overlap}")
+    straight = rows(train(config(*run), tmp_path / "straight"))
+    train(config(*run, "epochs=1"), tmp_path / "split")
+    resumed = rows(train(config(*run, "resume=true"), tmp_path / "split"))
     assert [row["epoch"] for row in resumed] == ["0", "1"]
     for key in ("test_success", "loss_actor", "loss_value", "q_mean", "is_weight_mean"):
         assert [float(r[key]) for r in resumed] == pytest.approx([float(r[key]) for r in straight], rel=1e-5)
@@ -81,6 +84,11 @@ def test_bad_values_are_listed_with_what_is_allowed():
     assert "epochs=0: must be a positive integer" in message
     assert "replay.future_p=1.5: must be a number in [0.0, 1.0]" in message
     assert "env.goal_space='huge': must be one of ['standard', 'extended']" in message
+
+
+def test_overlap_needs_the_serial_backend():
+    with pytest.raises(ConfigError, match="overlap_collection=true: .* env_backend=serial"):
+        validate_config(config("overlap_collection=true", "env_backend=parallel"))
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

@@ -18,6 +18,9 @@ class HERExploration(TensorDictModuleBase):
     plain policy for test episodes. Place it after the actor in a
     :class:`~tensordict.nn.TensorDictSequential`.
 
+    Draws from ``generator`` (torch's global one when ``None``): with its own generator,
+    the exploration stream is reproducible wherever the episodes are collected.
+
     Examples:
         >>> from tensordict import TensorDict
         >>> from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -38,6 +41,7 @@ class HERExploration(TensorDictModuleBase):
         low: float = -1.0,
         high: float = 1.0,
         action_key: str = "action",
+        generator: torch.Generator | None = None,
     ) -> None:
         super().__init__()
         self.in_keys = [action_key]
@@ -46,13 +50,15 @@ class HERExploration(TensorDictModuleBase):
         self.noise_std = noise_std
         self.low = low
         self.high = high
+        self.generator = generator
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         if exploration_type() not in (ExplorationType.RANDOM, None):
             return td
         action = td.get(self.in_keys[0])
-        noisy = (action + self.noise_std * torch.randn_like(action)).clamp(self.low, self.high)
-        uniform = torch.empty_like(action).uniform_(self.low, self.high)
-        replace = torch.rand(action.shape[:-1] + (1,), device=action.device) < self.random_eps
+        noise = torch.randn(action.shape, generator=self.generator, device=action.device, dtype=action.dtype)
+        noisy = (action + self.noise_std * noise).clamp(self.low, self.high)
+        uniform = torch.empty_like(action).uniform_(self.low, self.high, generator=self.generator)
+        replace = torch.rand(action.shape[:-1] + (1,), generator=self.generator, device=action.device) < self.random_eps
         td.set(self.out_keys[0], torch.where(replace, uniform, noisy))
         return td

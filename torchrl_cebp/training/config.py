@@ -76,6 +76,9 @@ def validate_config(cfg: DictConfig) -> None:
     ):
         positive_int(key)
     check("resume", lambda v: isinstance(v, bool), "true or false")
+    check("overlap_collection", lambda v: isinstance(v, bool), "true or false")
+    if cfg.get("overlap_collection") is True and cfg.get("env_backend") == "parallel":
+        errors.append("  overlap_collection=true: collects in one worker process, so needs env_backend=serial")
     real_in("replay.future_p", 0.0, 1.0)
     real_in("agent.tau", 0.0, 1.0, open_low=True)
     real_in("agent.random_eps", 0.0, 1.0)

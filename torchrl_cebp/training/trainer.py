@@ -1,9 +1,10 @@
 """DDPG + HER training with any of the replay samplers, as in baselines' HER (readable top to bottom).
 
 An epoch is ``cycles_per_epoch`` cycles; a cycle collects ``rollouts_per_cycle x workers``
-whole episodes with a TorchRL collector over a batched env, stores them, runs
-``updates_per_cycle`` updates of ``batch_size x workers`` transitions, and moves the target
-networks. Each epoch ends with deterministic test episodes, a CSV row and a checkpoint.
+whole episodes from a batched env, stores them, runs ``updates_per_cycle`` updates of
+``batch_size x workers`` transitions, and moves the target networks. Each epoch ends with
+deterministic test episodes, a CSV row and a checkpoint. With ``overlap_collection`` a worker
+process collects the next cycle's episodes while this one's updates run.
 """
 
 from __future__ import annotations
@@ -20,15 +21,14 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictSequential
-from torchrl.collectors import Collector
 from torchrl.data import LazyTensorStorage
 from torchrl.data.replay_buffers.samplers import Sampler
-from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
+from torchrl.envs import EnvBase, ParallelEnv
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import SoftUpdate
 from tqdm import tqdm
 
-from torchrl_cebp.agents import HERDDPGLoss, HERExploration, ObsGoalNormalizer, make_actor, make_critic
+from torchrl_cebp.agents import HERDDPGLoss, make_critic
 from torchrl_cebp.envs import make_env
 from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
 from torchrl_cebp.training.checkpoint import (
@@ -40,6 +40,7 @@ from torchrl_cebp.training.checkpoint import (
 )
 from torchrl_cebp.training.config import ConfigError, check_same_run, resolve_device, validate_config
 from torchrl_cebp.training.metrics import EpochCsv
+from torchrl_cebp.training.rollouts import RolloutWorker, Rollouts, Seeds, make_policy
 
 CSV_NAME = "progress.csv"
 
@@ -82,6 +83,23 @@ def evaluate_success_rate(env: EnvBase, policy: TensorDictSequential, n_episodes
     return torch.cat(successes)[:n_episodes].float().mean().item()
 
 
+def make_batched_env(cfg: DictConfig, n_envs: int, device: torch.device | str = "cpu") -> EnvBase:
+    """``n_envs`` simulations of the task: stepped in turn by one env, or one process each (``env_backend``)."""
+    if cfg.env_backend == "parallel":
+        return ParallelEnv(n_envs, functools.partial(make_env, cfg.env.task, cfg.env.goal_space, device=device))
+    return make_env(cfg.env.task, cfg.env.goal_space, device=device, num_envs=n_envs)
+
+
+def make_rollouts(cfg: DictConfig, dims: tuple[int, int, int], episode_steps: int) -> Rollouts:
+    """The training episodes' env and a copy of the exploration policy, with its own noise generator."""
+    _, explore = make_policy(
+        *dims, cfg.agent.hidden, random_eps=cfg.agent.random_eps, noise_std=cfg.agent.noise_std,
+        generator=torch.Generator(),
+    )
+    n_envs = cfg.rollouts_per_cycle * cfg.workers
+    return Rollouts(make_batched_env(cfg, n_envs), explore, episode_steps, drop_keys=["agent_input"])
+
+
 def sampling_spread(sampler: Sampler) -> dict[str, float]:
     """Effective fraction of stored episodes the sampler draws from, ``1 / (N sum p^2)``, when it exposes ``p``."""
     n = getattr(sampler, "n_episodes", 0)
@@ -111,29 +129,29 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         )
     device = resolve_device(cfg.device)
 
-    # Environments: one batched env collects the training episodes, another runs the tests.
+    # Environments: the training episodes come from a copy of the policy (in a worker process
+    # with overlap_collection), the test episodes from this one. Both run on the CPU.
     n_envs = cfg.rollouts_per_cycle * cfg.workers
-    env_fn = functools.partial(make_env, cfg.env.task, cfg.env.goal_space, device=device)
-    batched_env = SerialEnv if cfg.env_backend == "serial" else ParallelEnv
-    train_env, test_env = batched_env(n_envs, env_fn), batched_env(n_envs, env_fn)
     spec_env = make_env(cfg.env.task, cfg.env.goal_space)
     episode_steps = spec_env.max_episode_steps
-    obs_dim = spec_env.observation_spec["observation"].shape[-1]
-    goal_dim = spec_env.observation_spec["desired_goal"].shape[-1]
-    action_dim = spec_env.action_spec.shape[-1]
+    dims = (
+        spec_env.observation_spec["observation"].shape[-1],
+        spec_env.observation_spec["desired_goal"].shape[-1],
+        spec_env.action_spec.shape[-1],
+    )
+    new_rollouts = functools.partial(make_rollouts, cfg, dims, episode_steps)
+    rollouts = RolloutWorker(new_rollouts) if cfg.overlap_collection else new_rollouts()
+    test_env = make_batched_env(cfg, n_envs, device)
 
     # Agent: the normaliser is shared by the policy and (outside the loss) the training batches.
-    normalizer = ObsGoalNormalizer(obs_dim, goal_dim).to(device)
-    actor = make_actor(obs_dim + goal_dim, action_dim, cfg.agent.hidden).to(device)
-    critic = make_critic(obs_dim + goal_dim, action_dim, cfg.agent.hidden).to(device)
+    policy, exploration_policy = make_policy(*dims, cfg.agent.hidden)
+    normalizer, actor = policy.to(device)
+    critic = make_critic(dims[0] + dims[1], dims[2], cfg.agent.hidden).to(device)
     loss = HERDDPGLoss(actor, critic, gamma=1.0 - 1.0 / episode_steps, action_l2=cfg.agent.action_l2)
     target_updater = SoftUpdate(loss, tau=cfg.agent.tau)
-    actor_optim = torch.optim.Adam(loss.actor_network_params.values(True, True), lr=cfg.agent.lr_actor)
-    critic_optim = torch.optim.Adam(loss.value_network_params.values(True, True), lr=cfg.agent.lr_critic)
-    policy = TensorDictSequential(normalizer, actor)
-    exploration_policy = TensorDictSequential(
-        policy, HERExploration(random_eps=cfg.agent.random_eps, noise_std=cfg.agent.noise_std)
-    )
+    # Fused Adam: one kernel per step instead of a dozen per parameter group (~1 ms of 15 per update).
+    actor_optim = torch.optim.Adam(loss.actor_network_params.values(True, True), lr=cfg.agent.lr_actor, fused=True)
+    critic_optim = torch.optim.Adam(loss.value_network_params.values(True, True), lr=cfg.agent.lr_critic, fused=True)
 
     # Replay: whole episodes as rows, the configured sampler, HER relabelling at sampling time.
     replay = make_replay_buffer(
@@ -150,15 +168,8 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         episode_steps,
     )
 
-    collector = Collector(
-        train_env,
-        exploration_policy,
-        frames_per_batch=n_envs * episode_steps,
-        total_frames=-1,
-        storing_device="cpu",  # where the replay storage lives
-        auto_register_policy_transforms=False,
-    )
-    episode_batches = iter(collector)
+    def collection_weights() -> dict[str, torch.Tensor]:
+        return {key: value.detach().cpu() for key, value in exploration_policy.state_dict().items()}
 
     start_epoch, wall_before = 0, 0.0
     if resuming:
@@ -169,7 +180,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         actor_optim.load_state_dict(state["actor_optim"])
         critic_optim.load_state_dict(state["critic_optim"])
         replay.load_state_dict(state["replay"])
-        # Restored last, so that building the collector above draws nothing from the restored stream.
+        # Restored last, so that building the agent above draws nothing from the restored stream.
         set_rng_state(state["rng"])
         start_epoch, wall_before = state["epoch"] + 1, state["wall_s"]
     csv_log = EpochCsv(run_dir / CSV_NAME, start_epoch)
@@ -178,16 +189,20 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     progress = tqdm(range(start_epoch, cfg.epochs), initial=start_epoch, total=cfg.epochs, desc="epochs")
     for epoch in progress:
         epoch_start = time.perf_counter()
-        # Env randomness is reseeded per epoch, so a resumed run repeats an uninterrupted one.
-        collector.set_seed(derive_seed(cfg.seed, epoch, 0))
-        collector.reset()
+        # Each epoch starts from the current policy and reseeded env and exploration streams,
+        # so a resumed run repeats an uninterrupted one, with or without overlap.
+        rollouts.submit(collection_weights(), Seeds(derive_seed(cfg.seed, epoch, 0), derive_seed(cfg.seed, epoch, 2)))
         totals: dict[str, torch.Tensor] = defaultdict(float)
         collect_s = update_s = 0.0
-        for _ in range(cfg.cycles_per_epoch):
+        for cycle in range(cfg.cycles_per_epoch):
             tick = time.perf_counter()
-            episodes = next(episode_batches).exclude("collector", normalizer.out_keys[0])
+            episodes = rollouts.result()
             replay.extend(episodes)
             normalizer.update(normalizer_feed(episodes))
+            next_cycle = cycle + 1 < cfg.cycles_per_epoch
+            if cfg.overlap_collection and next_cycle:
+                # The next cycle's episodes, collected during this cycle's updates: one cycle stale.
+                rollouts.submit(collection_weights())
             collect_s += time.perf_counter() - tick
 
             tick = time.perf_counter()
@@ -210,6 +225,8 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
                     totals["is_weight_min"] += batch["priority_weight"].min()
             target_updater.step()
             update_s += time.perf_counter() - tick
+            if not cfg.overlap_collection and next_cycle:
+                rollouts.submit(collection_weights())
 
         if hasattr(sampler, "refit"):
             sampler.refit(replay.storage)
@@ -255,7 +272,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         progress.set_postfix(success=f"{success:.3f}", steps_per_s=f"{env_steps / epoch_s:.0f}")
         tqdm.write(f"epoch {epoch:3d}  test success {success:.3f}  ({env_steps / epoch_s:.0f} env steps/s)")
 
-    collector.shutdown()
+    rollouts.close()
     test_env.close()
     spec_env.close()
     return run_dir / CSV_NAME
