@@ -38,7 +38,7 @@ def make_policy(
 
     Examples:
         >>> policy, explore = make_policy(25, 3, 4, [32])
-        >>> sorted(policy.state_dict()) == sorted(explore.state_dict())
+        >>> explore[0] is policy  # one set of weights: the exploration wraps the deterministic policy
         True
     """
     actor = make_actor(obs_dim + goal_dim, action_dim, hidden)
