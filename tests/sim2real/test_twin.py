@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -20,8 +21,8 @@ from torchrl_cebp.sim2real import (
     TwinCamera,
     Workspace,
 )
-from torchrl_cebp.training import load_policy
 from torchrl_cebp.sim2real.__main__ import main, parse_args
+from torchrl_cebp.training import load_policy
 
 
 @pytest.fixture(scope="module")
@@ -159,3 +160,23 @@ def test_load_policy_reads_the_trainer_checkpoint(tmp_path):
     with loss.actor_network_params.to_module(loss.actor_network):
         expected = loss.actor_network(normalizer(obs.clone()))["action"]
     torch.testing.assert_close(policy(obs)["action"], expected)
+
+
+def test_camera_only_mode_annotates_recorded_frames(intact_twin, tmp_path, capsys):
+    backend, camera = intact_twin
+    (tmp_path / "recorded").mkdir()
+    for i in range(3):  # frames as a camera recorded them
+        cv2.imwrite(str(tmp_path / "recorded" / f"{i}.png"), camera.read())
+    assert main(["perceive", f"frames={tmp_path / 'recorded'}", f"out={tmp_path / 'annotated'}"]) == 0
+    printed = capsys.readouterr().out
+    assert "frame_0000.png: ok, cube at [" in printed
+    assert len(list((tmp_path / "annotated").glob("*.png"))) == 3
+
+
+def test_closed_loop_runs_a_trained_checkpoint_end_to_end(tmp_path, capsys):
+    from tests.training.test_training import config
+    from torchrl_cebp.training import train
+
+    train(config("env=franka_pick_place", "sampler=cebp", "epochs=1", "cycles_per_epoch=1"), tmp_path)
+    assert main(["run", f"checkpoint={tmp_path}", "backend=sim", "episodes=1"]) == 0
+    assert "success rate" in capsys.readouterr().out

@@ -5,6 +5,7 @@
     python -m torchrl_cebp.sim2real calibrate backend=sim out=table.yaml
     python -m torchrl_cebp.sim2real calibrate backend=franky host=172.16.0.2 out=table.yaml
     python -m torchrl_cebp.sim2real debug out=debug_frames steps=40
+    python -m torchrl_cebp.sim2real perceive frames=recorded/ calibration=table.yaml out=annotated/   # camera only
 
 On hardware (``backend=franky``) ``calibration=`` names the file ``calibrate`` wrote and ``camera=`` the
 OpenCV device (default 0).
@@ -24,7 +25,7 @@ from tensordict.nn import TensorDictModuleBase
 from torchrl.envs.utils import step_mdp
 
 from torchrl_cebp.sim2real.calibration import TableCalibration
-from torchrl_cebp.sim2real.camera import FrameSource, OpenCVCamera
+from torchrl_cebp.sim2real.camera import CameraLost, FrameSource, ImageFolderCamera, OpenCVCamera
 from torchrl_cebp.sim2real.perception import CubeLocator, CubePerception, draw_perception
 from torchrl_cebp.sim2real.policy import ScriptedPickPlace
 from torchrl_cebp.sim2real.real_loop import ParallaxCorrection, RealLoopEnv, SafetyStatus
@@ -51,6 +52,8 @@ _COMMANDS: dict[str, dict[str, tuple[Callable[[str], Any], Any]]] = {
         "checkpoint": (str, ""), "seed": (int, 0), "calibration": (str, ""), "host": (str, ""), "camera": (int, 0),
         "camera_position": (_floats, ()), "goal": (_floats, ()),
     },
+    # Camera only: recorded frames through the perception, no robot (calibration defaults to the twin's).
+    "perceive": {"backend": (str, "sim"), "frames": (str, None), "out": (str, None), "calibration": (str, "")},
 }
 
 
@@ -187,6 +190,34 @@ def debug(options: dict[str, Any]) -> list[Path]:
     return written
 
 
+def perceive(options: dict[str, Any]) -> list[Path]:
+    """Camera-only debugging: runs the perception on a folder of recorded frames and writes them annotated."""
+    if options["calibration"]:
+        calibration = TableCalibration.load(options["calibration"])
+    else:
+        from torchrl_cebp.sim2real.twin import TWIN_CALIBRATION
+
+        calibration = TWIN_CALIBRATION
+    locator = CubeLocator(calibration)
+    out = Path(options["out"])
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    with ImageFolderCamera(options["frames"]) as camera:
+        while True:
+            try:
+                frame = camera.read()
+            except CameraLost:
+                break
+            found = locator.locate(frame)
+            path = out / f"frame_{len(written):04d}.png"
+            cv2.imwrite(str(path), draw_perception(frame, found))
+            written.append(path)
+            where = np.round(found.position, 4).tolist() if found.ok else "-"
+            print(f"{path.name}: {found.reason}, cube at {where}")
+    print(f"wrote {len(written)} annotated frames to {out}")
+    return written
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m torchrl_cebp.sim2real``."""
     try:
@@ -196,7 +227,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     torch.set_num_threads(1)
     try:
-        {"run": run, "calibrate": calibrate, "debug": debug}[command](options)
+        {"run": run, "calibrate": calibrate, "debug": debug, "perceive": perceive}[command](options)
     except (FileNotFoundError, ValueError) as error:  # a missing checkpoint or calibration, a bad file
         print(f"error: {error}", file=sys.stderr)
         return 2

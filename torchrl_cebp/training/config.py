@@ -8,7 +8,7 @@ from numbers import Real
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from torchrl_cebp.envs import GOAL_SPACES, TASKS
+from torchrl_cebp.envs import ALL_TASKS, GOAL_SPACES
 from torchrl_cebp.replay.her import STRATEGIES
 
 DEVICES = ("auto", "cpu", "cuda")
@@ -65,7 +65,7 @@ def validate_config(cfg: DictConfig) -> None:
         )
 
     one_of("device", DEVICES)
-    one_of("env.task", TASKS)
+    one_of("env.task", ALL_TASKS)
     one_of("env.goal_space", GOAL_SPACES)
     one_of("env_backend", ENV_BACKENDS)
     one_of("replay.strategy", STRATEGIES)
