@@ -126,3 +126,17 @@ def test_normaliser_sees_goals_achieved_later_in_the_episode():
     step_ids = torch.arange(n * T, dtype=torch.float32).reshape(n, T)
     # goal of (e, t) is the achieved goal of a later next-state of the same episode
     assert (goals >= step_ids).all() and (goals < (torch.arange(n) + 1).unsqueeze(1) * T).all()
+
+
+def test_tensorboard_logger_gets_every_csv_column(tmp_path):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    train(config("sampler=cebp", "env=push", "epochs=1", "logger=tensorboard"), tmp_path)
+    events = next((tmp_path / "logs").rglob("events.out.tfevents.*"))
+    scalars = EventAccumulator(str(events.parent)).Reload().Tags()["scalars"]
+    assert {"test_success", "loss_value", "is_weight_mean", "env_steps_per_s"} <= set(scalars)
+
+
+def test_unknown_logger_is_refused_with_the_valid_ones():
+    with pytest.raises(ConfigError, match="logger='tb'.*tensorboard"):
+        validate_config(config("logger=tb"))

@@ -10,6 +10,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from torchrl_cebp.envs import ALL_TASKS, GOAL_SPACES
 from torchrl_cebp.replay.her import STRATEGIES
+from torchrl_cebp.training.metrics import LOGGERS
 
 DEVICES = ("auto", "cpu", "cuda")
 ENV_BACKENDS = ("serial", "parallel")
@@ -68,6 +69,7 @@ def validate_config(cfg: DictConfig) -> None:
     one_of("env.task", ALL_TASKS)
     one_of("env.goal_space", GOAL_SPACES)
     one_of("env_backend", ENV_BACKENDS)
+    one_of("logger", LOGGERS)
     one_of("replay.strategy", STRATEGIES)
     check("seed", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
     for key in (

@@ -6,6 +6,32 @@ import csv
 from pathlib import Path
 from typing import Any
 
+from torchrl.record.loggers import Logger, get_logger
+
+# Where the per-epoch rows go besides the CSV, through TorchRL's loggers.
+LOGGERS = ("none", "tensorboard", "wandb", "mlflow")
+
+
+def make_logger(kind: str, run_dir: str | Path) -> Logger | None:
+    """A TorchRL logger writing under ``run_dir/logs`` (``None`` for ``"none"``).
+
+    ``tensorboard`` needs the ``tensorboard`` package, ``wandb`` and ``mlflow`` theirs
+    (``pip install torchrl-cebp[loggers]``); set ``WANDB_MODE=offline`` to log W&B without a network.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     make_logger("none", d) is None
+        True
+    """
+    if kind not in LOGGERS:
+        raise ValueError(f"unknown logger {kind!r}; valid loggers: {list(LOGGERS)}")
+    if kind == "none":
+        return None
+    run_dir = Path(run_dir)
+    extra = {"wandb_kwargs": {"project": "torchrl-cebp"}} if kind == "wandb" else {}
+    return get_logger(kind, logger_name=str(run_dir / "logs"), experiment_name=run_dir.name, **extra)
+
 
 class EpochCsv:
     """Appends one row per epoch to a CSV file; the columns are fixed by the first row.

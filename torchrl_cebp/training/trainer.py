@@ -39,7 +39,7 @@ from torchrl_cebp.training.checkpoint import (
     set_rng_state,
 )
 from torchrl_cebp.training.config import ConfigError, check_same_run, resolve_device, validate_config
-from torchrl_cebp.training.metrics import EpochCsv
+from torchrl_cebp.training.metrics import EpochCsv, make_logger
 from torchrl_cebp.training.rollouts import RolloutWorker, Rollouts, Seeds, make_policy
 
 CSV_NAME = "progress.csv"
@@ -184,6 +184,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         set_rng_state(state["rng"])
         start_epoch, wall_before = state["epoch"] + 1, state["wall_s"]
     csv_log = EpochCsv(run_dir / CSV_NAME, start_epoch)
+    logger = make_logger(cfg.logger, run_dir)
     run_start = time.perf_counter()
 
     progress = tqdm(range(start_epoch, cfg.epochs), initial=start_epoch, total=cfg.epochs, desc="epochs")
@@ -240,21 +241,23 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         env_steps = cfg.cycles_per_epoch * n_envs * episode_steps
         n_updates = cfg.cycles_per_epoch * cfg.updates_per_cycle
         wall_s = wall_before + time.perf_counter() - run_start
-        csv_log.write(
-            {
-                "epoch": epoch,
-                "test_success": success,
-                **{key: (value / n_updates).item() for key, value in totals.items()},
-                **sampling_spread(sampler),
-                "stored_episodes": len(replay.storage) // episode_steps,
-                "env_steps_per_s": env_steps / epoch_s,
-                "collect_s": collect_s,
-                "update_s": update_s,
-                "test_s": test_s,
-                "epoch_s": epoch_s,
-                "wall_s": wall_s,
-            }
-        )
+        row = {
+            "epoch": epoch,
+            "test_success": success,
+            **{key: (value / n_updates).item() for key, value in totals.items()},
+            **sampling_spread(sampler),
+            "stored_episodes": len(replay.storage) // episode_steps,
+            "env_steps_per_s": env_steps / epoch_s,
+            "collect_s": collect_s,
+            "update_s": update_s,
+            "test_s": test_s,
+            "epoch_s": epoch_s,
+            "wall_s": wall_s,
+        }
+        csv_log.write(row)
+        if logger is not None:
+            for key, value in row.items():
+                logger.log_scalar(key, value, step=epoch)
         save_checkpoint(
             {
                 "epoch": epoch,
