@@ -50,6 +50,13 @@ class TouchReporting:
     ``touch`` (and ``info["touch"]``) holds ``[left, right]``: the mean over the physics substeps
     after a step (the env's ``_mujoco_step`` calls :meth:`substep_touch`), the reading at the
     reset state after a reset.
+
+    Example:
+        >>> from torchrl_cebp.envs import make_touch_fetch
+        >>> env = make_touch_fetch("pick_place")  # a TouchReporting env
+        >>> _, info = env.reset(seed=0)
+        >>> info["touch"].tolist()  # the gripper starts in free air
+        [0.0, 0.0]
     """
 
     model: mujoco.MjModel

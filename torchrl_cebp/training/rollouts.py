@@ -52,6 +52,14 @@ class Rollouts:
     :meth:`submit` loads the weights and, with ``seeds``, restarts the env's and the
     exploration's random streams; :meth:`result` collects. Collecting in :meth:`result`
     keeps the order of work of the single-process trainer.
+
+    Example:
+        >>> from torchrl_cebp.envs import make_env
+        >>> _, explore = make_policy(25, 3, 4, [32], generator=torch.Generator())
+        >>> rollouts = Rollouts(make_env("push", num_envs=2), explore, 50, drop_keys=["agent_input"])
+        >>> rollouts.submit(explore.state_dict(), Seeds(env=0, exploration=1))
+        >>> rollouts.result().shape
+        torch.Size([2, 50])
     """
 
     def __init__(self, env: EnvBase, policy: TensorDictSequential, episode_steps: int, drop_keys: list[str]) -> None:
@@ -103,6 +111,8 @@ class RolloutWorker:
 
     Weights and episodes cross the pipe as plain pickles (copies, no shared memory),
     so the worker's copy of the policy changes only when asked.
+    Its use (and a test of it) is in the trainer with ``overlap_collection=true``; the spawned
+    process must be able to import ``make_rollouts``, so it cannot be defined in an example here.
     """
 
     def __init__(self, make_rollouts: Callable[[], Rollouts]) -> None:

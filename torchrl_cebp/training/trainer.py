@@ -56,6 +56,13 @@ class RelabelledTransitions:
     Baselines feeds its normaliser such relabelled transitions of each new batch of
     episodes, so the goal statistics cover the goals the networks are trained on
     (independently of how the sampler draws from the buffer).
+
+    Example:
+        >>> from torchrl_cebp.envs import make_env
+        >>> env = make_env("push", num_envs=2)
+        >>> feed = RelabelledTransitions(HindsightRelabel(env.compute_reward), n_episodes=2, episode_steps=50)
+        >>> feed(env.rollout(50))["desired_goal"].shape
+        torch.Size([100, 3])
     """
 
     def __init__(self, her: HindsightRelabel, n_episodes: int, episode_steps: int) -> None:

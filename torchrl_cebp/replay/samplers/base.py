@@ -97,6 +97,24 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     Args:
         generator (torch.Generator, optional): random source of the draws;
             the global torch RNG when omitted.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl.data import TensorDictReplayBuffer
+        >>> from torchrl_cebp.replay import EpisodeStorage
+        >>> class LongestReach(EpisodePrioritySampler):
+        ...     "Episodes whose object travelled further are drawn more often."
+        ...     def episode_priority(self, episodes):
+        ...         path = episodes["next", "achieved_goal"]
+        ...         return (path[:, -1] - path[:, 0]).norm(dim=-1).double()
+        >>> episodes = TensorDict({"next": {"achieved_goal": torch.zeros(2, 50, 3)}}, [2, 50])
+        >>> episodes["next", "achieved_goal"][1, -1, 0] = 0.3  # only episode 1 moved the object
+        >>> rb = TensorDictReplayBuffer(storage=EpisodeStorage(10 * 50), sampler=LongestReach(),
+        ...                             batch_size=16, dim_extend=0)
+        >>> _ = rb.extend(episodes)
+        >>> rb.sample()["index"][:, 0].unique().tolist()
+        [1]
     """
 
     def __init__(self, generator: torch.Generator | None = None) -> None:
