@@ -111,6 +111,7 @@ class RolloutWorker:
 
     Weights and episodes cross the pipe as plain pickles (copies, no shared memory),
     so the worker's copy of the policy changes only when asked.
+
     Its use (and a test of it) is in the trainer with ``overlap_collection=true``; the spawned
     process must be able to import ``make_rollouts``, so it cannot be defined in an example here.
     """
