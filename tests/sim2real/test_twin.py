@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pytest
 import torch
@@ -162,12 +161,9 @@ def test_load_policy_reads_the_trainer_checkpoint(tmp_path):
     torch.testing.assert_close(policy(obs)["action"], expected)
 
 
-def test_camera_only_mode_annotates_recorded_frames(intact_twin, tmp_path, capsys):
-    backend, camera = intact_twin
-    (tmp_path / "recorded").mkdir()
-    for i in range(3):  # frames as a camera recorded them
-        cv2.imwrite(str(tmp_path / "recorded" / f"{i}.png"), camera.read())
-    assert main(["perceive", f"frames={tmp_path / 'recorded'}", f"out={tmp_path / 'annotated'}"]) == 0
+def test_camera_only_mode_annotates_recorded_frames(tmp_path, capsys):
+    assert main(["debug", f"out={tmp_path / 'debug'}", "steps=3"]) == 0  # records the raw frames too
+    assert main(["perceive", f"frames={tmp_path / 'debug' / 'raw'}", f"out={tmp_path / 'annotated'}"]) == 0
     printed = capsys.readouterr().out
     assert "frame_0000.png: ok, cube at [" in printed
     assert len(list((tmp_path / "annotated").glob("*.png"))) == 3

@@ -5,7 +5,7 @@
     python -m torchrl_cebp.sim2real calibrate backend=sim out=table.yaml
     python -m torchrl_cebp.sim2real calibrate backend=franky host=172.16.0.2 out=table.yaml
     python -m torchrl_cebp.sim2real debug out=debug_frames steps=40
-    python -m torchrl_cebp.sim2real perceive frames=recorded/ calibration=table.yaml out=annotated/   # camera only
+    python -m torchrl_cebp.sim2real perceive frames=debug_frames/raw out=annotated/   # camera only (calibration=FILE)
 
 On hardware (``backend=franky``) ``calibration=`` names the file ``calibrate`` wrote and ``camera=`` the
 OpenCV device (default 0).
@@ -168,17 +168,21 @@ def calibrate(options: dict[str, Any]) -> TableCalibration:
 
 @torch.no_grad()
 def debug(options: dict[str, Any]) -> list[Path]:
-    """Runs one episode and writes each camera frame, annotated with what the perception saw, to ``out``."""
+    """Runs one episode and writes each camera frame, annotated with what the perception saw, to ``out``.
+
+    The frames as the camera gave them go to ``out/raw`` (replay them with the ``perceive`` command).
+    """
     env, _, camera = build_loop(options)
     policy = _policy(options)
     locator = env.perception.locator
     out = Path(options["out"])
-    out.mkdir(parents=True, exist_ok=True)
+    (out / "raw").mkdir(parents=True, exist_ok=True)
     written = []
     td = env.reset()
     for step in range(options["steps"]):
         frame = camera.read()
         path = out / f"frame_{step:04d}.png"
+        cv2.imwrite(str(out / "raw" / path.name), frame)
         cv2.imwrite(str(path), draw_perception(frame, locator.locate(frame)))
         written.append(path)
         td = env.step(policy(td))
