@@ -38,7 +38,8 @@ def read_progress(run_dir: Path) -> list[dict[str, float]]:
 
 
 def first_epoch_reaching(rows: list[dict[str, float]], level: float) -> int | None:
-    return next((int(row["epoch"]) for row in rows if row["test_success"] >= level), None)
+    # Success rates are float32 in the CSV (0.9 reads 0.8999999761...): compare with a tolerance.
+    return next((int(row["epoch"]) for row in rows if row["test_success"] >= level - 1e-6), None)
 
 
 def report(out: Path, samplers: list[str], seed: int) -> None:
