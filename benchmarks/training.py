@@ -45,7 +45,7 @@ class Timing:
     update_s: float | None = None
 
 
-def run_ours(cycles: int, workers: int, overlap: bool) -> Timing:
+def run_ours(cycles: int, workers: int, overlap: bool, threads: int) -> Timing:
     from pathlib import Path
 
     from torchrl_cebp.training import train
@@ -54,7 +54,7 @@ def run_ours(cycles: int, workers: int, overlap: bool) -> Timing:
     with initialize_config_dir(str(conf), version_base="1.3"):
         cfg = compose("config", overrides=[
             "env=push", "env.goal_space=standard", "epochs=1", f"cycles_per_epoch={cycles}", f"workers={workers}",
-            f"overlap_collection={str(overlap).lower()}", "threads=1", "device=cpu",
+            f"overlap_collection={str(overlap).lower()}", f"threads={threads}", "device=cpu",
         ])
     with tempfile.TemporaryDirectory() as run_dir:
         with open(train(cfg, run_dir), newline="") as f:
@@ -211,12 +211,13 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=50)
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--methods", nargs="+", default=["ours", "ours_overlap", "plain", "sb3"])
+    parser.add_argument("--threads", type=int, default=1, help="torch threads of every method's updates")
     args = parser.parse_args()
-    torch.set_num_threads(1)  # the peers' reference figures used one thread; ours sets its own (threads=1)
+    torch.set_num_threads(args.threads)  # the peers run in this process; ours sets the same through its config
     gym.register_envs(gymnasium_robotics)
     runners = {
-        "ours": lambda: run_ours(args.cycles, args.workers, overlap=False),
-        "ours_overlap": lambda: run_ours(args.cycles, args.workers, overlap=True),
+        "ours": lambda: run_ours(args.cycles, args.workers, overlap=False, threads=args.threads),
+        "ours_overlap": lambda: run_ours(args.cycles, args.workers, overlap=True, threads=args.threads),
         "plain": lambda: run_plain(args.cycles, args.workers),
         "sb3": lambda: run_sb3(args.cycles, args.workers),
     }
@@ -228,7 +229,7 @@ def main() -> None:
     def fmt(x: float | None) -> str:
         return "-" if x is None else f"{x:8.1f}"
 
-    print(f"\nFetchPush, {args.cycles} cycles x ({2 * args.workers} episodes + {UPDATES} updates of "
+    print(f"\ntorch threads {args.threads}; FetchPush, {args.cycles} cycles x ({2 * args.workers} episodes + {UPDATES} updates of "
           f"{256 * args.workers}), {10 * args.workers} test episodes; seconds (sim includes the test episodes)")
     print(f"{'method':14s} {'epoch':>8s} {'sim':>8s} {'updates':>8s} {'vs sb3':>7s} {'vs plain':>8s}")
     for name, t in results.items():
