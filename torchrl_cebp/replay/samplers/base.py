@@ -145,19 +145,17 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         """Number of episode rows written so far (at most the storage's rows)."""
         return self._n_stored
 
-    def _ensure_capacity(self, storage: Storage, episode_length: int) -> None:
+    def _ensure_tree(self, storage: Storage) -> None:
+        # The storage's row count is fixed once it holds data: one tree for its lifetime.
         n_rows = storage._max_size_along_dim0()
-        if self._tree is None or self._tree.size != n_rows:
+        if self._tree is None:
             self._tree = SumSegmentTreeFp64(n_rows)
-            old = self._priorities
             self._priorities = torch.zeros(n_rows, dtype=torch.float64)
-            self._priorities[: old.numel()] = old[:n_rows]
-            if old.numel():
-                self._tree[torch.arange(n_rows)] = self._priorities
-        if self._cumulative_step_weights is not None and (
-            self._cumulative_step_weights.shape != (n_rows, episode_length)
-        ):
-            self._cumulative_step_weights = None
+        elif self._tree.size != n_rows:
+            raise ValueError(
+                f"{type(self).__name__} holds priorities for {self._tree.size} episode rows, "
+                f"but this storage has {n_rows}: use one sampler per buffer"
+            )
 
     def mark_update(
         self, index: torch.Tensor | int, *, storage: Storage | None = None
@@ -176,7 +174,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         first, last = int(rows[0]), int(rows[-1])
         # A write is usually one run of consecutive rows: read it as a view, not a copy.
         episodes = storage._storage[first : last + 1] if last - first + 1 == rows.numel() else storage[rows]
-        self._ensure_capacity(storage, episodes.shape[1])
+        self._ensure_tree(storage)
         self.write_priorities(rows, episodes)
 
     def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase) -> None:
@@ -201,13 +199,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         """Overwrites the priorities of ``rows`` (used on write, and by samplers that re-rank)."""
         self._priorities[rows] = priority
         self._tree[rows] = priority
-
-    def extend(self, index: torch.Tensor) -> None:
-        # Priorities are set in mark_update, which the writer calls with the storage.
-        return
-
-    def add(self, index: int) -> None:
-        return
 
     def _uniform(self, *shape: int) -> torch.Tensor:
         return torch.rand(*shape, generator=self._rng, dtype=torch.float64)
