@@ -2,8 +2,10 @@
 
 The same schedule for every method: ``cycles`` x (``2 x workers`` episodes of 50 steps, then 40
 updates of ``256 x workers``), then ``10 x workers`` deterministic test episodes; 3 x 256 networks.
-The methods run one after another, each with one torch thread (our trainer with
-``overlap_collection=true`` adds one worker process for the simulation: the second core).
+The methods run one after another, each with the torch threads given as ``NAME:THREADS``; by
+default the peers get one thread (ANCHORS.md's setting) and two, and our trainer with
+``overlap_collection=true`` gets two, which it shares with its worker process for the simulation:
+one while the worker collects, both once it is done.
 
   * ours: ``torchrl_cebp.training.train`` (touch-sensing FetchPush, standard goals), overlap off and on;
   * plain: a single-threaded PyTorch + numpy DDPG+HER loop written here on gymnasium's ``FetchPush-v4``
@@ -210,31 +212,40 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--cycles", type=int, default=50)
     parser.add_argument("--workers", type=int, default=1)
-    parser.add_argument("--methods", nargs="+", default=["ours", "ours_overlap", "plain", "sb3"])
-    parser.add_argument("--threads", type=int, default=1, help="torch threads of every method's updates")
+    parser.add_argument(
+        "--methods", nargs="+", default=["ours:1", "ours_overlap:2", "plain:1", "sb3:1", "sb3:2"],
+        help="NAME[:THREADS] with NAME in ours, ours_overlap, plain, sb3; THREADS (torch threads) defaults to --threads",
+    )
+    parser.add_argument("--threads", type=int, default=1, help="torch threads of a method given without :THREADS")
     args = parser.parse_args()
-    torch.set_num_threads(args.threads)  # the peers run in this process; ours sets the same through its config
     gym.register_envs(gymnasium_robotics)
     runners = {
-        "ours": lambda: run_ours(args.cycles, args.workers, overlap=False, threads=args.threads),
-        "ours_overlap": lambda: run_ours(args.cycles, args.workers, overlap=True, threads=args.threads),
-        "plain": lambda: run_plain(args.cycles, args.workers),
-        "sb3": lambda: run_sb3(args.cycles, args.workers),
+        "ours": lambda threads: run_ours(args.cycles, args.workers, overlap=False, threads=threads),
+        "ours_overlap": lambda threads: run_ours(args.cycles, args.workers, overlap=True, threads=threads),
+        "plain": lambda threads: run_plain(args.cycles, args.workers),
+        "sb3": lambda threads: run_sb3(args.cycles, args.workers),
     }
     results = {}
-    for name in args.methods:
-        results[name] = runners[name]()
-        print(f"{name}: {results[name]}", flush=True)
+    for method in args.methods:
+        name, _, threads = method.partition(":")
+        if name not in runners:
+            parser.error(f"unknown method {name!r}: choose from {', '.join(runners)}")
+        label = f"{name}:{threads or args.threads}"
+        torch.set_num_threads(int(threads or args.threads))  # the peers run in this process; ours sets its own
+        results[label] = runners[name](int(threads or args.threads))
+        print(f"{label}: {results[label]}", flush=True)
 
     def fmt(x: float | None) -> str:
         return "-" if x is None else f"{x:8.1f}"
 
-    print(f"\ntorch threads {args.threads}; FetchPush, {args.cycles} cycles x ({2 * args.workers} episodes + {UPDATES} updates of "
-          f"{256 * args.workers}), {10 * args.workers} test episodes; seconds (sim includes the test episodes)")
-    print(f"{'method':14s} {'epoch':>8s} {'sim':>8s} {'updates':>8s} {'vs sb3':>7s} {'vs plain':>8s}")
-    for name, t in results.items():
-        ratios = [f"{results[p].epoch_s / t.epoch_s:6.2f}x" if p in results else "      -" for p in ("sb3", "plain")]
-        print(f"{name:14s} {fmt(t.epoch_s)} {fmt(t.sim_s)} {fmt(t.update_s)} {ratios[0]} {ratios[1]}")
+    peers = [label for label in results if label.startswith(("sb3:", "plain:"))]
+    print(f"\nFetchPush, {args.cycles} cycles x ({2 * args.workers} episodes + {UPDATES} updates of "
+          f"{256 * args.workers}), {10 * args.workers} test episodes; seconds (sim includes the test episodes); "
+          "NAME:THREADS = torch threads; 'vs P' = P's epoch time / this one's")
+    print(f"{'method':16s} {'epoch':>8s} {'sim':>8s} {'updates':>8s} " + " ".join(f"{'vs ' + p:>10s}" for p in peers))
+    for label, t in results.items():
+        ratios = " ".join(f"{results[p].epoch_s / t.epoch_s:9.2f}x" for p in peers)
+        print(f"{label:16s} {fmt(t.epoch_s)} {fmt(t.sim_s)} {fmt(t.update_s)} {ratios}")
 
 
 if __name__ == "__main__":

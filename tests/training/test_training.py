@@ -1,6 +1,8 @@
 import csv
+import functools
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -11,7 +13,8 @@ from tensordict import TensorDict
 
 from torchrl_cebp.replay import HindsightRelabel
 from torchrl_cebp.training import ConfigError, load_checkpoint, train, validate_config
-from torchrl_cebp.training.trainer import RelabelledTransitions
+from torchrl_cebp.training.rollouts import RolloutWorker, Seeds, make_policy
+from torchrl_cebp.training.trainer import RelabelledTransitions, make_rollouts
 
 REPO = Path(__file__).resolve().parents[2]
 TINY = [
@@ -48,11 +51,11 @@ def test_tiny_run_writes_csv_and_checkpoint(tmp_path, sampler):
     assert {"loss", "normalizer", "actor_optim", "critic_optim", "replay", "rng"} <= set(state)
 
 
-@pytest.mark.parametrize("overlap", ["false", "true"])
-def test_resume_repeats_the_uninterrupted_run(tmp_path, overlap):
+@pytest.mark.parametrize(("overlap", "threads"), [("false", 1), ("true", 1), ("true", 2)])
+def test_resume_repeats_the_uninterrupted_run(tmp_path, overlap, threads):
     # CEBP: the sampler's priorities and the IS weights must come back too; with overlap, the
-    # worker process's env and exploration streams too
-    run = ("sampler=cebp", f"overlap_collection={overlap}")
+    # worker process's env and exploration streams too, whatever threads the updates switch between
+    run = ("sampler=cebp", f"overlap_collection={overlap}", f"threads={threads}")
     straight = rows(train(config(*run), tmp_path / "straight"))
     train(config(*run, "epochs=1"), tmp_path / "split")
     resumed = rows(train(config(*run, "resume=true"), tmp_path / "split"))
@@ -60,6 +63,24 @@ def test_resume_repeats_the_uninterrupted_run(tmp_path, overlap):
     for key in ("test_success", "loss_actor", "loss_value", "q_mean", "is_weight_mean"):
         assert [float(r[key]) for r in resumed] == pytest.approx([float(r[key]) for r in straight], rel=1e-5)
     assert load_checkpoint(tmp_path / "split")["epoch"] == 1
+
+
+def test_rollout_worker_is_busy_until_its_episodes_are_ready():
+    cfg = config()
+    dims = (25, 3, 4)
+    worker = RolloutWorker(functools.partial(make_rollouts, cfg, dims, 50))
+    try:
+        assert not worker.busy()
+        _, explore = make_policy(*dims, cfg.agent.hidden)
+        worker.submit(explore.state_dict(), Seeds(env=0, exploration=1))
+        assert worker.busy()  # two 50-step episodes take far longer than this line
+        deadline = time.monotonic() + 60
+        while worker.busy() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not worker.busy()
+        assert worker.result().shape == (cfg.rollouts_per_cycle, 50)
+    finally:
+        worker.close()
 
 
 def test_refuses_to_overwrite_a_checkpoint_or_resume_another_run(tmp_path):

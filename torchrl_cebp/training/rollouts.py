@@ -77,6 +77,10 @@ class Rollouts:
             self.exploration.generator.manual_seed(seeds.exploration)
         self._pending = True
 
+    def busy(self) -> bool:
+        """Whether a submitted collection is running in the background: never here (it runs in :meth:`result`)."""
+        return False
+
     @torch.no_grad()
     def result(self) -> TensorDictBase:
         if not self._pending:
@@ -123,14 +127,22 @@ class RolloutWorker:
         self._process = ctx.Process(target=_serve, args=(child, make_rollouts), name="rollouts", daemon=True)
         self._process.start()
         child.close()
+        self._collecting = False
         # Waits for the worker's envs, so that its start-up (seconds) is not counted as collection.
         if self._conn.recv_bytes() != b"ready":
             raise RuntimeError("the rollout worker failed to start")
 
     def submit(self, weights: dict[str, torch.Tensor], seeds: Seeds | None = None) -> None:
         self._conn.send_bytes(pickle.dumps((weights, seeds)))
+        self._collecting = True
+
+    def busy(self) -> bool:
+        """Whether the worker is still collecting the submitted episodes (it holds a core meanwhile)."""
+        self._collecting = self._collecting and not self._conn.poll()
+        return self._collecting
 
     def result(self) -> TensorDictBase:
+        self._collecting = False
         return pickle.loads(self._conn.recv_bytes())
 
     def close(self) -> None:

@@ -215,6 +215,11 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
 
             tick = time.perf_counter()
             for _ in range(cfg.updates_per_cycle):
+                # The collecting worker holds a core: one thread fewer until it is done, so that
+                # the two never oversubscribe the cores and the updates get them all afterwards.
+                threads = max(1, cfg.threads - 1) if rollouts.busy() else cfg.threads
+                if threads != torch.get_num_threads():
+                    torch.set_num_threads(threads)
                 batch = replay.sample().to(device)
                 normalizer(batch)
                 normalizer(batch["next"])
