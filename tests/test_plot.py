@@ -8,7 +8,7 @@ from torchrl_cebp.plot import collect_sweep, main, quartiles
 
 def write_run(folder, success):
     folder.mkdir(parents=True)
-    lines = ["epoch,test_success,loss_actor"] + [f"{e},{s},0.1" for e, s in enumerate(success)]
+    lines = ["epoch,test_success,loss_actor,epoch_s"] + [f"{e},{s},0.1,60" for e, s in enumerate(success)]
     (folder / "progress.csv").write_text("\n".join(lines) + "\n")
 
 
@@ -40,3 +40,15 @@ def test_errors_name_the_problem(tmp_path):
     write_run(tmp_path / "a/b/seed0", [0.1])
     with pytest.raises(KeyError, match="'success'.*test_success"):
         main([str(tmp_path), "--metric", "success"])
+
+
+def test_table_gives_median_and_quartiles_after_n_epochs(tmp_path, capsys):
+    for seed, success in enumerate([[0.0, 0.2], [0.0, 0.4], [0.0, 0.6]]):
+        write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", success)
+    write_run(tmp_path / "push-extended/her/paper/seed0", [0.1])
+    main([str(tmp_path), "--table", "1", "2"])
+    rows = {line.split(" | ")[1]: line for line in capsys.readouterr().out.splitlines() if line.startswith("| push")}
+    assert rows["cebp/paper"] == "| push-extended | cebp/paper | 3 | 0.00 [0.00, 0.00] | 0.40 [0.30, 0.50] | 0.1 |"
+    assert rows["her/paper"] == "| push-extended | her/paper | 1 | 0.10 [0.10, 0.10] | - | 0.0 |"
+    with pytest.raises(ValueError, match="start at 1"):
+        main([str(tmp_path), "--table", "0"])

@@ -1,7 +1,8 @@
 """Success curves of a sweep: median and interquartile range over seeds, per sampler and task.
 
-    python -m torchrl_cebp.plot runs                      # writes runs/success.png
+    python -m torchrl_cebp.plot runs                      # writes runs/test_success.png
     python -m torchrl_cebp.plot runs --out fig.png --metric test_success
+    python -m torchrl_cebp.plot runs --table 5 10         # and prints a Markdown table after 5 and 10 epochs
 
 A run is any folder holding a ``progress.csv``; runs are grouped by their parent folder (the
 seeds of one configuration), and one panel is drawn per top-level folder under the sweep root
@@ -80,11 +81,11 @@ def plot_sweep(root: str | Path, out: str | Path | None = None, metric: str = "t
     for ax, (panel, curves_by_label) in zip(axes[0], sorted(groups.items())):
         for label, curves in sorted(curves_by_label.items()):
             q25, median, q75 = quartiles(curves)
-            epochs = np.arange(len(median))
+            epochs = np.arange(1, len(median) + 1)
             (line,) = ax.plot(epochs, median, label=f"{label} ({len(curves)} seed{'s' * (len(curves) > 1)})")
             ax.fill_between(epochs, q25, q75, color=line.get_color(), alpha=0.2)
         ax.set_title(panel)
-        ax.set_xlabel("epoch")
+        ax.set_xlabel("epochs trained")
         ax.set_ylabel(metric.replace("_", " "))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
@@ -94,13 +95,61 @@ def plot_sweep(root: str | Path, out: str | Path | None = None, metric: str = "t
     return out
 
 
+def summary_table(root: str | Path, after_epochs: list[int], metric: str = "test_success") -> str:
+    """A Markdown table: per task and configuration, the median [25th, 75th percentile] of ``metric``
+    after each of ``after_epochs`` epochs over the seeds that got there, and the runs' training hours.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     for seed, values in enumerate([(0.1, 0.5), (0.3, 0.7), (0.2,)]):
+        ...         run = Path(d) / "push-extended" / "her" / "paper" / f"seed{seed}"
+        ...         run.mkdir(parents=True)
+        ...         rows = [f"{e},{v},1800" for e, v in enumerate(values)]
+        ...         _ = (run / CSV_NAME).write_text("\\n".join(["epoch,test_success,epoch_s", *rows]) + "\\n")
+        ...     print(summary_table(d, [1, 2]))
+        | task | configuration | seeds | after 1 epoch | after 2 epochs | training hours |
+        |---|---|---|---|---|---|
+        | push-extended | her/paper | 3 | 0.20 [0.15, 0.25] | 0.60 [0.55, 0.65] (2 seeds) | 2.5 |
+    """
+    if any(n < 1 for n in after_epochs):
+        raise ValueError(f"after_epochs={after_epochs}: epoch counts start at 1")
+    root = Path(root)
+    values = collect_sweep(root, metric)
+    if not values:
+        raise FileNotFoundError(f"no {CSV_NAME} under {root}")
+    epoch_seconds = collect_sweep(root, "epoch_s")
+    header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs), "training hours"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for panel, curves_by_label in sorted(values.items()):
+        for label, curves in sorted(curves_by_label.items()):
+            cells = [panel, label, str(len(curves))]
+            for n in after_epochs:
+                reached = [curve[n - 1] for curve in curves if len(curve) >= n]
+                if not reached:
+                    cells.append("-")
+                    continue
+                q25, median, q75 = np.percentile(reached, [25, 50, 75])
+                seeds = f" ({len(reached)} seed{'s' * (len(reached) > 1)})" if len(reached) < len(curves) else ""
+                cells.append(f"{median:.2f} [{q25:.2f}, {q75:.2f}]{seeds}")
+            hours = sum(curve.sum() for curve in epoch_seconds[panel][label]) / 3600
+            cells.append(f"{hours:.1f}")
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description="Median and interquartile success curves of a sweep.")
     parser.add_argument("root", help="sweep folder (e.g. runs/ or multirun/...)")
     parser.add_argument("--out", help="PNG path (default: <root>/<metric>.png)")
     parser.add_argument("--metric", default="test_success", help="CSV column to plot")
+    parser.add_argument(
+        "--table", nargs="+", type=int, metavar="N", help="also print a Markdown table of the metric after N epochs"
+    )
     args = parser.parse_args(argv)
     print(f"wrote {plot_sweep(args.root, args.out, args.metric)}")
+    if args.table:
+        print(summary_table(args.root, args.table, args.metric))
 
 
 if __name__ == "__main__":

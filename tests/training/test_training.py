@@ -114,8 +114,33 @@ def test_overlap_needs_the_serial_backend():
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "train.py", *args], cwd=REPO, capture_output=True, text=True, timeout=120
+        [sys.executable, "train.py", *args], cwd=REPO, capture_output=True, text=True, timeout=300
     )
+
+
+def _tiny_stage(stage: str, sweep_dir: Path, *overrides: str) -> subprocess.CompletedProcess:
+    # One worker and the tiny schedule instead of the paper's scale; in this process, one run after another.
+    return _cli("-m", f"+comparison={stage}", *TINY, "workers=1", "seed=0", "hydra/launcher=basic",
+                f"hydra.sweep.dir={sweep_dir}", *overrides)
+
+
+def test_comparison_stage_continues_where_it_stopped(tmp_path):
+    first = _tiny_stage("push", tmp_path, "sampler=her,cebp", "epochs=1")
+    assert first.returncode == 0, first.stderr
+    her, cebp = (tmp_path / f"push-extended/{name}/paper/seed0/progress.csv" for name in ("her", "cebp"))
+    first_epoch = rows(her)
+    assert [row["epoch"] for row in first_epoch] == ["0"] and [row["epoch"] for row in rows(cebp)] == ["0"]
+    again = _tiny_stage("push", tmp_path, "sampler=her,cebp", "epochs=2")  # the stage's resume=true
+    assert again.returncode == 0, again.stderr
+    assert [row["epoch"] for row in rows(her)] == ["0", "1"]
+    assert rows(her)[0] == first_epoch[0]  # the finished epoch was not redone
+
+
+def test_temperature_stage_gives_each_temperature_its_own_runs(tmp_path):
+    result = _tiny_stage("push_temperature", tmp_path, "sampler.temperature=0.1,1.0")
+    assert result.returncode == 0, result.stderr
+    for temperature in ("0.1", "1.0"):
+        assert load_checkpoint(tmp_path / f"push-extended-temperature/cebp_T{temperature}/paper/seed0")["epoch"] == 1
 
 
 def test_cli_rejects_a_bad_value_at_start(tmp_path):
