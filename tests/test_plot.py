@@ -48,7 +48,8 @@ def test_table_gives_median_and_quartiles_after_n_epochs(tmp_path, capsys):
     write_run(tmp_path / "push-extended/her/paper/seed0", [0.1])
     main([str(tmp_path), "--table", "1", "2"])
     rows = {line.split(" | ")[1]: line for line in capsys.readouterr().out.splitlines() if line.startswith("| push")}
-    assert rows["cebp/paper"] == "| push-extended | cebp/paper | 3 | 0.00 [0.00, 0.00] | 0.40 [0.30, 0.50] | 0.1 |"
-    assert rows["her/paper"] == "| push-extended | her/paper | 1 | 0.10 [0.10, 0.10] | - | 0.0 |"
+    # the preset every configuration shares goes to the task column
+    assert rows["cebp"] == "| push-extended (paper) | cebp | 3 | 0.00 [0.00, 0.00] | 0.40 [0.30, 0.50] | 0.1 |"
+    assert rows["her"] == "| push-extended (paper) | her | 1 | 0.10 [0.10, 0.10] | - | 0.0 |"
     with pytest.raises(ValueError, match="start at 1"):
         main([str(tmp_path), "--table", "0"])

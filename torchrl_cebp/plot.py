@@ -19,6 +19,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 import numpy as np  # noqa: E402
 
 CSV_NAME = "progress.csv"
@@ -55,6 +56,23 @@ def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarra
     return groups
 
 
+def short_labels(labels: list[str]) -> tuple[dict[str, str], str]:
+    """Drops the label parts every label shares (e.g. the preset of a sweep), returned as a suffix.
+
+    Examples:
+        >>> short_labels(["cebp/paper", "her/paper"])
+        ({'cebp/paper': 'cebp', 'her/paper': 'her'}, 'paper')
+        >>> short_labels(["her/paper"])
+        ({'her/paper': 'her/paper'}, '')
+    """
+    split = [label.split("/") for label in labels]
+    shared = [] if len(labels) < 2 else [
+        i for i, part in enumerate(split[0]) if all(len(s) == len(split[0]) and s[i] == part for s in split)
+    ]
+    short = {label: "/".join(p for i, p in enumerate(parts) if i not in shared) for label, parts in zip(labels, split)}
+    return short, "/".join(split[0][i] for i in shared)
+
+
 def quartiles(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """25th, 50th and 75th percentiles per epoch over the seeds that reached that epoch.
 
@@ -79,12 +97,14 @@ def plot_sweep(root: str | Path, out: str | Path | None = None, metric: str = "t
     out = Path(out) if out is not None else root / f"{metric}.png"
     fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.8), squeeze=False)
     for ax, (panel, curves_by_label) in zip(axes[0], sorted(groups.items())):
+        short, shared = short_labels(sorted(curves_by_label))
         for label, curves in sorted(curves_by_label.items()):
             q25, median, q75 = quartiles(curves)
             epochs = np.arange(1, len(median) + 1)
-            (line,) = ax.plot(epochs, median, label=f"{label} ({len(curves)} seed{'s' * (len(curves) > 1)})")
+            (line,) = ax.plot(epochs, median, label=f"{short[label]} ({len(curves)} seed{'s' * (len(curves) > 1)})")
             ax.fill_between(epochs, q25, q75, color=line.get_color(), alpha=0.2)
-        ax.set_title(panel)
+        ax.set_title(f"{panel} ({shared})" if shared else panel)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epochs trained")
         ax.set_ylabel(metric.replace("_", " "))
         ax.grid(alpha=0.3)
@@ -122,8 +142,9 @@ def summary_table(root: str | Path, after_epochs: list[int], metric: str = "test
     header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs), "training hours"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for panel, curves_by_label in sorted(values.items()):
+        short, shared = short_labels(sorted(curves_by_label))
         for label, curves in sorted(curves_by_label.items()):
-            cells = [panel, label, str(len(curves))]
+            cells = [f"{panel} ({shared})" if shared else panel, short[label], str(len(curves))]
             for n in after_epochs:
                 reached = [curve[n - 1] for curve in curves if len(curve) >= n]
                 if not reached:
