@@ -230,9 +230,10 @@ def main() -> None:
         name, _, threads = method.partition(":")
         if name not in runners:
             parser.error(f"unknown method {name!r}: choose from {', '.join(runners)}")
-        label = f"{name}:{threads or args.threads}"
-        torch.set_num_threads(int(threads or args.threads))  # the peers run in this process; ours sets its own
-        results[label] = runners[name](int(threads or args.threads))
+        n_threads = int(threads or args.threads)
+        label = f"{name}:{n_threads}"
+        torch.set_num_threads(n_threads)  # the peers run in this process; ours sets its own
+        results[label] = runners[name](n_threads)
         print(f"{label}: {results[label]}", flush=True)
 
     def fmt(x: float | None) -> str:

@@ -56,21 +56,22 @@ def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarra
     return groups
 
 
-def short_labels(labels: list[str]) -> tuple[dict[str, str], str]:
-    """Drops the label parts every label shares (e.g. the preset of a sweep), returned as a suffix.
+def short_labels(panel: str, labels: list[str]) -> tuple[str, dict[str, str]]:
+    """The panel's title and its labels, the parts every label shares (e.g. the preset) moved to the title.
 
     Examples:
-        >>> short_labels(["cebp/paper", "her/paper"])
-        ({'cebp/paper': 'cebp', 'her/paper': 'her'}, 'paper')
-        >>> short_labels(["her/paper"])
-        ({'her/paper': 'her/paper'}, '')
+        >>> short_labels("push-extended", ["cebp/paper", "her/paper"])
+        ('push-extended (paper)', {'cebp/paper': 'cebp', 'her/paper': 'her'})
+        >>> short_labels("push-extended", ["her/paper"])
+        ('push-extended', {'her/paper': 'her/paper'})
     """
     split = [label.split("/") for label in labels]
     shared = [] if len(labels) < 2 else [
         i for i, part in enumerate(split[0]) if all(len(s) == len(split[0]) and s[i] == part for s in split)
     ]
     short = {label: "/".join(p for i, p in enumerate(parts) if i not in shared) for label, parts in zip(labels, split)}
-    return short, "/".join(split[0][i] for i in shared)
+    title = f"{panel} ({'/'.join(split[0][i] for i in shared)})" if shared else panel
+    return title, short
 
 
 def quartiles(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -97,13 +98,13 @@ def plot_sweep(root: str | Path, out: str | Path | None = None, metric: str = "t
     out = Path(out) if out is not None else root / f"{metric}.png"
     fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.8), squeeze=False)
     for ax, (panel, curves_by_label) in zip(axes[0], sorted(groups.items())):
-        short, shared = short_labels(sorted(curves_by_label))
+        title, short = short_labels(panel, sorted(curves_by_label))
         for label, curves in sorted(curves_by_label.items()):
             q25, median, q75 = quartiles(curves)
             epochs = np.arange(1, len(median) + 1)
             (line,) = ax.plot(epochs, median, label=f"{short[label]} ({len(curves)} seed{'s' * (len(curves) > 1)})")
             ax.fill_between(epochs, q25, q75, color=line.get_color(), alpha=0.2)
-        ax.set_title(f"{panel} ({shared})" if shared else panel)
+        ax.set_title(title)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epochs trained")
         ax.set_ylabel(metric.replace("_", " "))
@@ -142,9 +143,9 @@ def summary_table(root: str | Path, after_epochs: list[int], metric: str = "test
     header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs), "training hours"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for panel, curves_by_label in sorted(values.items()):
-        short, shared = short_labels(sorted(curves_by_label))
+        title, short = short_labels(panel, sorted(curves_by_label))
         for label, curves in sorted(curves_by_label.items()):
-            cells = [f"{panel} ({shared})" if shared else panel, short[label], str(len(curves))]
+            cells = [title, short[label], str(len(curves))]
             for n in after_epochs:
                 reached = [curve[n - 1] for curve in curves if len(curve) >= n]
                 if not reached:

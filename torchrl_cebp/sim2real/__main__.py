@@ -53,7 +53,7 @@ _COMMANDS: dict[str, dict[str, tuple[Callable[[str], Any], Any]]] = {
         "camera_position": (_floats, ()), "goal": (_floats, ()),
     },
     # Camera only: recorded frames through the perception, no robot (calibration defaults to the twin's).
-    "perceive": {"backend": (str, "sim"), "frames": (str, None), "out": (str, None), "calibration": (str, "")},
+    "perceive": {"frames": (str, None), "out": (str, None), "calibration": (str, "")},
 }
 
 
@@ -83,13 +83,13 @@ def parse_args(argv: Sequence[str]) -> tuple[str, dict[str, Any]]:
             if default is None:
                 raise ValueError(f"{command} needs {key}=...")
             options[key] = default
-    if options["backend"] not in _BACKENDS:
+    if options.get("backend", "sim") not in _BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(_BACKENDS)}, got {options['backend']!r}.")
     if options.get("policy", "scripted") not in ("scripted", "checkpoint"):
         raise ValueError(f"policy must be 'scripted' or 'checkpoint', got {options['policy']!r}.")
     if options.get("policy") == "checkpoint" and not options["checkpoint"]:
         raise ValueError("Give checkpoint=PATH (a training run directory or checkpoint.pt), or policy=scripted.")
-    if options["backend"] == "franky" and not options["host"]:
+    if options.get("backend") == "franky" and not options["host"]:
         raise ValueError("backend=franky needs host=ROBOT_IP.")
     return command, options
 
