@@ -7,7 +7,8 @@ default the peers get one thread (ANCHORS.md's setting) and two, and our trainer
 ``overlap_collection=true`` gets two, which it shares with its worker process for the simulation:
 one while the worker collects, both once it is done.
 
-  * ours: ``torchrl_cebp.training.train`` (touch-sensing FetchPush, standard goals), overlap off and on;
+  * ours: ``torchrl_cebp.training.train`` (touch-sensing FetchPush, standard goals), overlap off and on,
+    and overlapped with ``precision=bf16`` (bfloat16 matrix products in the updates);
   * plain: a single-threaded PyTorch + numpy DDPG+HER loop written here on gymnasium's ``FetchPush-v4``
     (the floor a hand-written script reaches);
   * sb3: Stable-Baselines3 ``DDPG`` + ``HerReplayBuffer`` on ``FetchPush-v4`` (it moves its target
@@ -47,7 +48,7 @@ class Timing:
     update_s: float | None = None
 
 
-def run_ours(cycles: int, workers: int, overlap: bool, threads: int) -> Timing:
+def run_ours(cycles: int, workers: int, overlap: bool, threads: int, precision: str = "fp32") -> Timing:
     from pathlib import Path
 
     from torchrl_cebp.training import train
@@ -56,7 +57,7 @@ def run_ours(cycles: int, workers: int, overlap: bool, threads: int) -> Timing:
     with initialize_config_dir(str(conf), version_base="1.3"):
         cfg = compose("config", overrides=[
             "env=push", "env.goal_space=standard", "epochs=1", f"cycles_per_epoch={cycles}", f"workers={workers}",
-            f"overlap_collection={str(overlap).lower()}", f"threads={threads}", "device=cpu",
+            f"overlap_collection={str(overlap).lower()}", f"threads={threads}", f"precision={precision}", "device=cpu",
         ])
     with tempfile.TemporaryDirectory() as run_dir:
         with open(train(cfg, run_dir), newline="") as f:
@@ -213,8 +214,8 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=50)
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument(
-        "--methods", nargs="+", default=["ours:1", "ours_overlap:2", "plain:1", "sb3:1", "sb3:2"],
-        help="NAME[:THREADS] with NAME in ours, ours_overlap, plain, sb3; THREADS (torch threads) defaults to --threads",
+        "--methods", nargs="+", default=["ours:1", "ours_overlap:2", "ours_overlap_bf16:2", "plain:1", "sb3:1", "sb3:2"],
+        help="NAME[:THREADS] with NAME in ours, ours_overlap, ours_overlap_bf16, plain, sb3; THREADS (torch threads) defaults to --threads",
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads of a method given without :THREADS")
     args = parser.parse_args()
@@ -222,6 +223,9 @@ def main() -> None:
     runners = {
         "ours": lambda threads: run_ours(args.cycles, args.workers, overlap=False, threads=threads),
         "ours_overlap": lambda threads: run_ours(args.cycles, args.workers, overlap=True, threads=threads),
+        "ours_overlap_bf16": lambda threads: run_ours(
+            args.cycles, args.workers, overlap=True, threads=threads, precision="bf16"
+        ),
         "plain": lambda threads: run_plain(args.cycles, args.workers),
         "sb3": lambda threads: run_sb3(args.cycles, args.workers),
     }

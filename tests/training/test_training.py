@@ -1,5 +1,6 @@
 import csv
 import functools
+import math
 import subprocess
 import sys
 import time
@@ -65,6 +66,16 @@ def test_resume_repeats_the_uninterrupted_run(tmp_path, overlap, threads):
     assert load_checkpoint(tmp_path / "split")["epoch"] == 1
 
 
+def test_bf16_precision_trains_with_bfloat16_products(tmp_path):
+    fp32 = rows(train(config("epochs=1"), tmp_path / "fp32"))[0]
+    bf16 = rows(train(config("epochs=1", "precision=bf16"), tmp_path / "bf16"))[0]
+    for key in ("loss_actor", "loss_value", "q_mean"):
+        assert math.isfinite(float(bf16[key]))
+        # same seed, same data until the first update: only the rounding of the products differs
+        assert float(bf16[key]) != float(fp32[key])
+        assert float(bf16[key]) == pytest.approx(float(fp32[key]), rel=0.1, abs=0.05)
+
+
 def test_rollout_worker_is_busy_until_its_episodes_are_ready():
     cfg = config()
     dims = (25, 3, 4)
@@ -99,12 +110,14 @@ def test_every_sampler_config_instantiates(sampler, env):
 
 def test_bad_values_are_listed_with_what_is_allowed():
     with pytest.raises(ConfigError) as err:
-        validate_config(config("device=tpu", "epochs=0", "replay.future_p=1.5", "env.goal_space=huge"))
+        validate_config(config("device=tpu", "epochs=0", "replay.future_p=1.5", "env.goal_space=huge",
+                               "precision=fp16"))
     message = str(err.value)
     assert "device='tpu': must be one of ['auto', 'cpu', 'cuda']" in message
     assert "epochs=0: must be a positive integer" in message
     assert "replay.future_p=1.5: must be a number in [0.0, 1.0]" in message
     assert "env.goal_space='huge': must be one of ['standard', 'extended']" in message
+    assert "precision='fp16': must be one of ['fp32', 'bf16']" in message
 
 
 def test_overlap_needs_the_serial_backend():

@@ -14,6 +14,7 @@ from torchrl_cebp.training.metrics import LOGGERS
 
 DEVICES = ("auto", "cpu", "cuda")
 ENV_BACKENDS = ("serial", "parallel")
+PRECISIONS = ("fp32", "bf16")
 
 # ``${mul:a,b,...}`` lets a config derive a count, e.g. PER's beta-annealing horizon.
 if not OmegaConf.has_resolver("mul"):
@@ -69,6 +70,7 @@ def validate_config(cfg: DictConfig) -> None:
     one_of("env.task", ALL_TASKS)
     one_of("env.goal_space", GOAL_SPACES)
     one_of("env_backend", ENV_BACKENDS)
+    one_of("precision", PRECISIONS)
     one_of("logger", LOGGERS)
     one_of("replay.strategy", STRATEGIES)
     check("seed", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
@@ -103,7 +105,7 @@ def resolve_device(name: str) -> torch.device:
     return torch.device(name)
 
 
-# What a resumed run must share with the checkpointed one (epochs may grow, device and threads may change).
+# What a resumed run must share with the checkpointed one (epochs may grow; device, threads and precision may change).
 RUN_DEFINING_KEYS = (
     "seed", "workers", "cycles_per_epoch", "rollouts_per_cycle", "updates_per_cycle", "batch_size",
     "test_episodes", "env", "sampler", "agent", "replay",

@@ -223,7 +223,8 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
                 batch = replay.sample().to(device)
                 normalizer(batch)
                 normalizer(batch["next"])
-                losses = loss(batch)
+                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.precision == "bf16"):
+                    losses = loss(batch)
                 actor_optim.zero_grad()
                 critic_optim.zero_grad()
                 (losses["loss_actor"] + losses["loss_value"]).backward()
