@@ -247,10 +247,11 @@ def main() -> None:
     print(f"\nFetchPush, {args.cycles} cycles x ({2 * args.workers} episodes + {UPDATES} updates of "
           f"{256 * args.workers}), {10 * args.workers} test episodes; seconds (sim includes the test episodes); "
           "NAME:THREADS = torch threads; 'vs P' = P's epoch time / this one's")
-    print(f"{'method':16s} {'epoch':>8s} {'sim':>8s} {'updates':>8s} " + " ".join(f"{'vs ' + p:>10s}" for p in peers))
+    width = max(len(label) for label in results)
+    print(f"{'method':{width}s} {'epoch':>8s} {'sim':>8s} {'updates':>8s} " + " ".join(f"{'vs ' + p:>10s}" for p in peers))
     for label, t in results.items():
         ratios = " ".join(f"{results[p].epoch_s / t.epoch_s:9.2f}x" for p in peers)
-        print(f"{label:16s} {fmt(t.epoch_s)} {fmt(t.sim_s)} {fmt(t.update_s)} {ratios}")
+        print(f"{label:{width}s} {fmt(t.epoch_s)} {fmt(t.sim_s)} {fmt(t.update_s)} {ratios}")
 
 
 if __name__ == "__main__":
