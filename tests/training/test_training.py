@@ -4,6 +4,7 @@ import math
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,7 @@ from tensordict import TensorDict
 
 from torchrl_cebp.replay import HindsightRelabel
 from torchrl_cebp.training import ConfigError, load_checkpoint, train, validate_config
+from torchrl_cebp.training.config import warn_if_bf16_is_emulated
 from torchrl_cebp.training.rollouts import RolloutWorker, Seeds, make_policy
 from torchrl_cebp.training.trainer import RelabelledTransitions, make_rollouts
 
@@ -74,6 +76,16 @@ def test_bf16_precision_trains_with_bfloat16_products(tmp_path):
         # same seed, same data until the first update: only the rounding of the products differs
         assert float(bf16[key]) != float(fp32[key])
         assert float(bf16[key]) == pytest.approx(float(fp32[key]), rel=0.1, abs=0.05)
+
+
+def test_bf16_on_a_cpu_without_bfloat16_instructions_warns(monkeypatch):
+    monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda: False)
+    monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda: False)
+    with pytest.warns(UserWarning, match="precision=bf16: this CPU has neither AVX512-BF16 nor AMX"):
+        warn_if_bf16_is_emulated("bf16", torch.device("cpu"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warn_if_bf16_is_emulated("fp32", torch.device("cpu"))
 
 
 def test_rollout_worker_is_busy_until_its_episodes_are_ready():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from numbers import Real
 
 import torch
@@ -103,6 +104,18 @@ def resolve_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     return torch.device(name)
+
+
+def warn_if_bf16_is_emulated(precision: str, device: torch.device) -> None:
+    """Warns when ``precision=bf16`` would run on a CPU without bfloat16 instructions (slower than fp32)."""
+    if precision != "bf16" or device.type != "cpu":
+        return
+    if not (torch.cpu._is_avx512_bf16_supported() or torch.cpu._is_amx_tile_supported()):
+        warnings.warn(
+            "precision=bf16: this CPU has neither AVX512-BF16 nor AMX, so bfloat16 products are emulated "
+            "and the updates will likely be slower than with precision=fp32",
+            stacklevel=2,
+        )
 
 
 # What a resumed run must share with the checkpointed one (epochs may grow; device, threads and precision may change).

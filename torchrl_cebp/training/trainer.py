@@ -38,7 +38,13 @@ from torchrl_cebp.training.checkpoint import (
     save_checkpoint,
     set_rng_state,
 )
-from torchrl_cebp.training.config import ConfigError, check_same_run, resolve_device, validate_config
+from torchrl_cebp.training.config import (
+    ConfigError,
+    check_same_run,
+    resolve_device,
+    validate_config,
+    warn_if_bf16_is_emulated,
+)
 from torchrl_cebp.training.metrics import EpochCsv, make_logger
 from torchrl_cebp.training.rollouts import RolloutWorker, Rollouts, Seeds, make_policy
 
@@ -135,6 +141,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
             "or choose another output directory (hydra.run.dir=...)"
         )
     device = resolve_device(cfg.device)
+    warn_if_bf16_is_emulated(cfg.precision, device)
 
     # Environments: the training episodes come from a copy of the policy (in a worker process
     # with overlap_collection), the test episodes from this one. Both run on the CPU.
