@@ -142,6 +142,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         )
     device = resolve_device(cfg.device)
     warn_if_bf16_is_emulated(cfg.precision, device)
+    use_bf16 = cfg.precision == "bf16"
 
     # Environments: the training episodes come from a copy of the policy (in a worker process
     # with overlap_collection), the test episodes from this one. Both run on the CPU.
@@ -230,7 +231,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
                 batch = replay.sample().to(device)
                 normalizer(batch)
                 normalizer(batch["next"])
-                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.precision == "bf16"):
+                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=use_bf16):
                     losses = loss(batch)
                 actor_optim.zero_grad()
                 critic_optim.zero_grad()
