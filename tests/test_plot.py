@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from torchrl_cebp.plot import collect_sweep, main, quartiles
+from torchrl_cebp.plot import collect_sweep, draw_sweep, main, quartiles
 
 
 def write_run(folder, success):
@@ -25,6 +25,17 @@ def test_plot_groups_seeds_and_draws_a_png(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
     image = np.asarray(Image.open(png).convert("RGB"))
     assert image.shape[0] > 100 and image.std() > 10  # a real figure, not a blank canvas
+
+
+def test_title_replaces_a_single_panels_folder_name_and_tops_several(tmp_path):
+    write_run(tmp_path / "learning/her/seed0", [0.0, 0.1])
+    assert [ax.get_title() for ax in draw_sweep(tmp_path / "learning").axes] == ["learning"]
+    assert [ax.get_title() for ax in draw_sweep(tmp_path / "learning", title="FetchPush").axes] == ["FetchPush"]
+    write_run(tmp_path / "sweep/push-extended/her/paper/seed0", [0.0, 0.1])
+    write_run(tmp_path / "sweep/slide-extended/her/paper/seed0", [0.0, 0.1])
+    fig = draw_sweep(tmp_path / "sweep", title="all tasks")
+    assert [ax.get_title() for ax in fig.axes] == ["push-extended", "slide-extended"]
+    assert fig.get_suptitle() == "all tasks"
 
 
 def test_quartiles_over_seeds():

@@ -1,7 +1,7 @@
 """Success curves of a sweep: median and interquartile range over seeds, per sampler and task.
 
     python -m torchrl_cebp.plot runs                      # writes runs/test_success.png
-    python -m torchrl_cebp.plot runs --out fig.png --metric test_success
+    python -m torchrl_cebp.plot runs --out fig.png --metric test_success --title "FetchPush"
     python -m torchrl_cebp.plot runs --table 5 10         # and prints a Markdown table after 5 and 10 epochs
 
 A run is any folder holding a ``progress.csv``; runs are grouped by their parent folder (the
@@ -89,28 +89,42 @@ def quartiles(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndar
     return tuple(np.nanpercentile(padded, q, axis=0) for q in (25, 50, 75))
 
 
-def plot_sweep(root: str | Path, out: str | Path | None = None, metric: str = "test_success") -> Path:
-    """Draws one panel per task, one median line and interquartile band per configuration; returns the PNG path."""
+def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None = None) -> plt.Figure:
+    """One panel per task, one median line and interquartile band per configuration.
+
+    ``title`` names the figure; with a single panel it replaces the panel's own title (its folder name),
+    which is what a sweep root without a ``<task>-<goal_space>`` level (e.g. ``runs/learning``) needs.
+    """
     root = Path(root)
     groups = collect_sweep(root, metric)
     if not groups:
         raise FileNotFoundError(f"no {CSV_NAME} under {root}")
-    out = Path(out) if out is not None else root / f"{metric}.png"
     fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.8), squeeze=False)
     for ax, (panel, curves_by_label) in zip(axes[0], sorted(groups.items())):
-        title, short = short_labels(panel, sorted(curves_by_label))
+        panel_title, short = short_labels(panel, sorted(curves_by_label))
         for label, curves in sorted(curves_by_label.items()):
             q25, median, q75 = quartiles(curves)
             epochs = np.arange(1, len(median) + 1)
             (line,) = ax.plot(epochs, median, label=f"{short[label]} ({len(curves)} seed{'s' * (len(curves) > 1)})")
             ax.fill_between(epochs, q25, q75, color=line.get_color(), alpha=0.2)
-        ax.set_title(title)
+        ax.set_title(title if title is not None and len(groups) == 1 else panel_title)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epochs trained")
         ax.set_ylabel(metric.replace("_", " "))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
+    if title is not None and len(groups) > 1:
+        fig.suptitle(title)
     fig.tight_layout()
+    return fig
+
+
+def plot_sweep(
+    root: str | Path, out: str | Path | None = None, metric: str = "test_success", title: str | None = None
+) -> Path:
+    """Draws the sweep (:func:`draw_sweep`) to a PNG, by default ``<root>/<metric>.png``; returns its path."""
+    fig = draw_sweep(root, metric, title)
+    out = Path(out) if out is not None else Path(root) / f"{metric}.png"
     fig.savefig(out, dpi=120)
     plt.close(fig)
     return out
@@ -165,11 +179,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("root", help="sweep folder (e.g. runs/ or multirun/...)")
     parser.add_argument("--out", help="PNG path (default: <root>/<metric>.png)")
     parser.add_argument("--metric", default="test_success", help="CSV column to plot")
+    parser.add_argument("--title", help="figure title (default: each panel is titled with its task folder)")
     parser.add_argument(
         "--table", nargs="+", type=int, metavar="N", help="also print a Markdown table of the metric after N epochs"
     )
     args = parser.parse_args(argv)
-    print(f"wrote {plot_sweep(args.root, args.out, args.metric)}")
+    print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title)}")
     if args.table:
         print(summary_table(args.root, args.table, args.metric))
 
