@@ -38,6 +38,18 @@ def test_title_replaces_a_single_panels_folder_name_and_tops_several(tmp_path):
     assert fig.get_suptitle() == "all tasks"
 
 
+def test_a_configuration_keeps_its_colour_and_fractions_share_one_scale(tmp_path):
+    write_run(tmp_path / "pick_place-extended/her/paper/seed0", [0.0, 0.01])
+    write_run(tmp_path / "push-extended/cebp/paper/seed0", [0.1, 0.8])
+    write_run(tmp_path / "push-extended/her/paper/seed0", [0.2, 0.9])
+    pick_place, push = draw_sweep(tmp_path).axes
+    her_alone, (cebp, her) = pick_place.get_lines(), push.get_lines()  # the lone her keeps "her/paper" as label
+    assert her_alone[0].get_color() == her.get_color() != cebp.get_color()
+    assert pick_place.get_ylim() == push.get_ylim() and pick_place.get_ylim()[1] > 0.8
+    unbounded = draw_sweep(tmp_path, metric="epoch_s").axes  # seconds: each task keeps its own scale
+    assert not unbounded[0].get_shared_y_axes().joined(*unbounded)
+
+
 def test_quartiles_over_seeds():
     q25, median, q75 = quartiles([np.array([0.0, 0.2]), np.array([0.4, 0.6]), np.array([0.8, 1.0])])
     np.testing.assert_allclose(median, [0.4, 0.6])

@@ -92,6 +92,8 @@ def quartiles(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndar
 def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None = None) -> plt.Figure:
     """One panel per task, one median line and interquartile band per configuration.
 
+    A configuration keeps its colour in every panel. A metric whose values all lie in [0, 1] (a success
+    rate, a fraction) is drawn on one shared scale, so that a task still near zero looks it.
     ``title`` names the figure; with a single panel it replaces the panel's own title (its folder name),
     which is what a sweep root without a ``<task>-<goal_space>`` level (e.g. ``runs/learning``) needs.
     """
@@ -99,18 +101,26 @@ def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None
     groups = collect_sweep(root, metric)
     if not groups:
         raise FileNotFoundError(f"no {CSV_NAME} under {root}")
-    fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.8), squeeze=False)
+    panels = {panel: short_labels(panel, sorted(curves_by_label)) for panel, curves_by_label in groups.items()}
+    palette = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    configurations = sorted({label for curves_by_label in groups.values() for label in curves_by_label})
+    colour = {label: palette[i % len(palette)] for i, label in enumerate(configurations)}
+    values = np.concatenate([c for curves_by_label in groups.values() for cs in curves_by_label.values() for c in cs])
+    fraction = bool(np.all((values >= 0) & (values <= 1)))
+    fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.8), squeeze=False, sharey=fraction)
     for ax, (panel, curves_by_label) in zip(axes[0], sorted(groups.items())):
-        panel_title, short = short_labels(panel, sorted(curves_by_label))
+        panel_title, short = panels[panel]
         for label, curves in sorted(curves_by_label.items()):
             q25, median, q75 = quartiles(curves)
             epochs = np.arange(1, len(median) + 1)
-            (line,) = ax.plot(epochs, median, label=f"{short[label]} ({len(curves)} seed{'s' * (len(curves) > 1)})")
-            ax.fill_between(epochs, q25, q75, color=line.get_color(), alpha=0.2)
+            seeds = f"{len(curves)} seed{'s' * (len(curves) > 1)}"
+            ax.plot(epochs, median, color=colour[label], label=f"{short[label]} ({seeds})")
+            ax.fill_between(epochs, q25, q75, color=colour[label], alpha=0.2)
         ax.set_title(title if title is not None and len(groups) == 1 else panel_title)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epochs trained")
         ax.set_ylabel(metric.replace("_", " "))
+        ax.yaxis.set_tick_params(labelleft=True)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     if title is not None and len(groups) > 1:
