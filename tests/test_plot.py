@@ -76,3 +76,18 @@ def test_table_gives_median_and_quartiles_after_n_epochs(tmp_path, capsys):
     assert rows["her"] == "| push-extended (paper) | her | 1 | 0.10 [0.10, 0.10] | - | 0.0 |"
     with pytest.raises(ValueError, match="start at 1"):
         main([str(tmp_path), "--table", "0"])
+
+
+def test_table_mean_over_a_window_of_epochs(tmp_path, capsys):
+    for seed, success in enumerate([[0.0, 0.2, 0.4], [0.0, 0.4, 0.8], [0.2, 0.6]]):
+        write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", success)
+    main([str(tmp_path), "--table", "3", "--mean-over", "2", "3"])
+    out = capsys.readouterr().out
+    assert "| task | configuration | seeds | after 3 epochs | mean over epochs 2-3 | training hours |" in out
+    # seeds 0 and 1 reached epoch 3: their means over epochs 2-3 are 0.3 and 0.6
+    assert "| push-extended | cebp/paper | 3 | 0.60 [0.50, 0.70] (2 seeds) | 0.45 [0.38, 0.53] (2 seeds) | 0.1 |" in out
+    with pytest.raises(ValueError, match=r"mean_over=\(3, 2\)"):
+        main([str(tmp_path), "--table", "3", "--mean-over", "3", "2"])
+    with pytest.raises(SystemExit):
+        main([str(tmp_path), "--mean-over", "2", "3"])
+    assert "give --table too" in capsys.readouterr().err

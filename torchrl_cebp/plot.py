@@ -3,6 +3,7 @@
     python -m torchrl_cebp.plot runs                      # writes runs/test_success.png
     python -m torchrl_cebp.plot runs --out fig.png --metric test_success --title "FetchPush"
     python -m torchrl_cebp.plot runs --table 5 10         # and prints a Markdown table after 5 and 10 epochs
+    python -m torchrl_cebp.plot runs --table 10 --mean-over 6 10   # and each seed's mean over epochs 6-10
 
 A run is any folder holding a ``progress.csv``; runs are grouped by their parent folder (the
 seeds of one configuration), and one panel is drawn per top-level folder under the sweep root
@@ -140,9 +141,33 @@ def plot_sweep(
     return out
 
 
-def summary_table(root: str | Path, after_epochs: list[int], metric: str = "test_success") -> str:
+def median_cell(per_seed: list[float], seeds_in_total: int) -> str:
+    """``median [25th, 75th percentile]`` of the seeds' values, naming how many when not all seeds count.
+
+    Examples:
+        >>> median_cell([0.1, 0.3], 3)
+        '0.20 [0.15, 0.25] (2 seeds)'
+        >>> median_cell([], 3)
+        '-'
+    """
+    if not per_seed:
+        return "-"
+    q25, median, q75 = np.percentile(per_seed, [25, 50, 75])
+    seeds = f" ({len(per_seed)} seed{'s' * (len(per_seed) > 1)})" if len(per_seed) < seeds_in_total else ""
+    return f"{median:.2f} [{q25:.2f}, {q75:.2f}]{seeds}"
+
+
+def summary_table(
+    root: str | Path,
+    after_epochs: list[int],
+    metric: str = "test_success",
+    mean_over: tuple[int, int] | None = None,
+) -> str:
     """A Markdown table: per task and configuration, the median [25th, 75th percentile] of ``metric``
     after each of ``after_epochs`` epochs over the seeds that got there, and the runs' training hours.
+    ``mean_over=(first, last)`` adds a column of each seed's mean over epochs ``first`` to ``last``
+    (counted from 1, both included; seeds that reached ``last``), steadier than one epoch's value
+    while success is still a few test episodes.
 
     Examples:
         >>> import tempfile
@@ -159,25 +184,28 @@ def summary_table(root: str | Path, after_epochs: list[int], metric: str = "test
     """
     if any(n < 1 for n in after_epochs):
         raise ValueError(f"after_epochs={after_epochs}: epoch counts start at 1")
+    if mean_over is not None and not 1 <= mean_over[0] <= mean_over[1]:
+        raise ValueError(f"mean_over={tuple(mean_over)}: needs 1 <= first <= last")
     root = Path(root)
     values = collect_sweep(root, metric)
     if not values:
         raise FileNotFoundError(f"no {CSV_NAME} under {root}")
     epoch_seconds = collect_sweep(root, "epoch_s")
-    header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs), "training hours"]
+    header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs)]
+    if mean_over is not None:
+        header.append(f"mean over epochs {mean_over[0]}-{mean_over[1]}")
+    header.append("training hours")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for panel, curves_by_label in sorted(values.items()):
         title, short = short_labels(panel, sorted(curves_by_label))
         for label, curves in sorted(curves_by_label.items()):
             cells = [title, short[label], str(len(curves))]
             for n in after_epochs:
-                reached = [curve[n - 1] for curve in curves if len(curve) >= n]
-                if not reached:
-                    cells.append("-")
-                    continue
-                q25, median, q75 = np.percentile(reached, [25, 50, 75])
-                seeds = f" ({len(reached)} seed{'s' * (len(reached) > 1)})" if len(reached) < len(curves) else ""
-                cells.append(f"{median:.2f} [{q25:.2f}, {q75:.2f}]{seeds}")
+                cells.append(median_cell([curve[n - 1] for curve in curves if len(curve) >= n], len(curves)))
+            if mean_over is not None:
+                first, last = mean_over
+                window = [curve[first - 1 : last].mean() for curve in curves if len(curve) >= last]
+                cells.append(median_cell(window, len(curves)))
             hours = sum(curve.sum() for curve in epoch_seconds[panel][label]) / 3600
             cells.append(f"{hours:.1f}")
             lines.append("| " + " | ".join(cells) + " |")
@@ -193,10 +221,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--table", nargs="+", type=int, metavar="N", help="also print a Markdown table of the metric after N epochs"
     )
+    parser.add_argument(
+        "--mean-over", nargs=2, type=int, metavar=("FIRST", "LAST"),
+        help="with --table: a column of each seed's mean over epochs FIRST to LAST",
+    )
     args = parser.parse_args(argv)
+    if args.mean_over and not args.table:
+        parser.error("--mean-over adds a column to --table: give --table too")
     print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title)}")
     if args.table:
-        print(summary_table(args.root, args.table, args.metric))
+        print(summary_table(args.root, args.table, args.metric, args.mean_over))
 
 
 if __name__ == "__main__":
