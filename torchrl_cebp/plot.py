@@ -90,6 +90,11 @@ def quartiles(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndar
     return tuple(np.nanpercentile(padded, q, axis=0) for q in (25, 50, 75))
 
 
+def seed_count(n: int) -> str:
+    """``"1 seed"``, ``"3 seeds"``: the count every legend entry and table cell names."""
+    return f"{n} seed{'s' * (n > 1)}"
+
+
 def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None = None) -> plt.Figure:
     """One panel per task, one median line and interquartile band per configuration.
 
@@ -114,8 +119,7 @@ def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None
         for label, curves in sorted(curves_by_label.items()):
             q25, median, q75 = quartiles(curves)
             epochs = np.arange(1, len(median) + 1)
-            seeds = f"{len(curves)} seed{'s' * (len(curves) > 1)}"
-            ax.plot(epochs, median, color=colour[label], label=f"{short[label]} ({seeds})")
+            ax.plot(epochs, median, color=colour[label], label=f"{short[label]} ({seed_count(len(curves))})")
             ax.fill_between(epochs, q25, q75, color=colour[label], alpha=0.2)
         ax.set_title(title if title is not None and len(groups) == 1 else panel_title)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -153,7 +157,7 @@ def median_cell(per_seed: list[float], seeds_in_total: int) -> str:
     if not per_seed:
         return "-"
     q25, median, q75 = np.percentile(per_seed, [25, 50, 75])
-    seeds = f" ({len(per_seed)} seed{'s' * (len(per_seed) > 1)})" if len(per_seed) < seeds_in_total else ""
+    seeds = f" ({seed_count(len(per_seed))})" if len(per_seed) < seeds_in_total else ""
     return f"{median:.2f} [{q25:.2f}, {q75:.2f}]{seeds}"
 
 
