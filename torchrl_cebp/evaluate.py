@@ -8,6 +8,7 @@ GIF (by extension) rendered offscreen (``MUJOCO_GL=osmesa`` on a CPU-only machin
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 from pathlib import Path
 
@@ -19,21 +20,22 @@ from torchrl_cebp.training.checkpoint import CHECKPOINT_NAME
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
 
-def _checkpoint_env(checkpoint: Path) -> tuple[str, str]:
+def _checkpoint_env(checkpoint: Path, **kwargs):
+    """The env the checkpoint's run trained on (task, goal space, robot); ``kwargs`` go to ``make_env``."""
+    from torchrl_cebp.envs import RobotOptions, make_env
+
     path = checkpoint / CHECKPOINT_NAME if checkpoint.is_dir() else checkpoint
-    config = torch.load(path, map_location="cpu", weights_only=True)["config"]
-    return config["env"]["task"], config["env"]["goal_space"]
+    env = torch.load(path, map_location="cpu", weights_only=True)["config"]["env"]
+    return make_env(env["task"], env["goal_space"], **dataclasses.asdict(RobotOptions.from_config(env)), **kwargs)
 
 
 @torch.no_grad()
 def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -> float:
     """Fraction of ``episodes`` deterministic episodes that end within the goal threshold."""
-    from torchrl_cebp.envs import make_env
     from torchrl_cebp.training import load_policy
 
-    task, goal_space = _checkpoint_env(Path(checkpoint))
     policy = load_policy(checkpoint)
-    env = make_env(task, goal_space, seed=seed, num_envs=episodes)
+    env = _checkpoint_env(Path(checkpoint), seed=seed, num_envs=episodes)
     rollout = env.rollout(env.max_episode_steps, policy, break_when_any_done=False)
     return rollout["next", "is_success"][:, -1].float().mean().item()
 
@@ -50,15 +52,13 @@ def record_video(
     """Renders ``episodes`` deterministic episodes to ``path`` (``.mp4`` or ``.gif``)."""
     import imageio.v3 as iio
 
-    from torchrl_cebp.envs import make_env
     from torchrl_cebp.training import load_policy
 
     path = Path(path)
     if path.suffix not in VIDEO_SUFFIXES:
         raise ValueError(f"video {str(path)!r}: unknown format {path.suffix!r}; valid: {list(VIDEO_SUFFIXES)}")
-    task, goal_space = _checkpoint_env(Path(checkpoint))
     policy = load_policy(checkpoint)
-    env = make_env(task, goal_space, seed=seed, render_size=size)
+    env = _checkpoint_env(Path(checkpoint), seed=seed, render_size=size)
     frames = []
     for _ in range(episodes):
         td = env.reset()

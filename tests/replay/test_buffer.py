@@ -6,12 +6,13 @@ import torch
 from tests.replay.conftest import T, make_episodes, sparse_reward
 from tests.replay.test_her import decode, labelled_episodes
 from torchrl_cebp.replay import make_replay_buffer
-from torchrl_cebp.samplers import CEBPSampler, CPERSampler, EBPSampler, MEPSampler, PERSampler, UniformEpisodeSampler
+from torchrl_cebp.samplers import CEBPSampler, InitialCEBPSampler, ReleasedCEBPSampler, CPERSampler, EBPSampler, MEPSampler, PERSampler, UniformEpisodeSampler
 
 SAMPLERS = {  # each built for a buffer of the given capacity
     "uniform": lambda capacity: UniformEpisodeSampler(),
     "cebp": lambda capacity: CEBPSampler("push"),
-    "cebp_released": lambda capacity: CEBPSampler("push", form="released"),
+    "cebp_released": lambda capacity: ReleasedCEBPSampler("push"),
+    "cebp_initial": lambda capacity: InitialCEBPSampler("push"),
     "cper": lambda capacity: CPERSampler(),
     "ebp": lambda capacity: EBPSampler(),
     "mep": lambda capacity: MEPSampler(),
@@ -84,7 +85,7 @@ def test_sampler_state_dict_round_trip_without_pickled_code(tmp_path):
     "sampler, key, shape",
     [
         (lambda: CEBPSampler("push"), ("next", "touch"), "[n_episodes, T, 2]"),
-        (lambda: CEBPSampler("push", form="released"), ("next", "observation"), "[n_episodes, T, *]"),
+        (lambda: ReleasedCEBPSampler("push"), ("next", "observation"), "[n_episodes, T, *]"),
         (CPERSampler, ("next", "touch"), "[n_episodes, T, 2]"),
         (EBPSampler, ("next", "achieved_goal"), "[n_episodes, T, 3]"),
     ],

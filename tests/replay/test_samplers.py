@@ -9,6 +9,8 @@ from tests.replay.conftest import T, make_episodes
 from torchrl_cebp.replay import EpisodeStorage
 from torchrl_cebp.samplers import (
     CEBPSampler,
+    InitialCEBPSampler,
+    ReleasedCEBPSampler,
     CPERSampler,
     EBPSampler,
     MEPSampler,
@@ -97,7 +99,7 @@ def test_cebp_paper_frequencies_and_weights(temperature):
 
 
 def test_cebp_released_frequencies_and_weights():
-    sampler = CEBPSampler("push", form="released")
+    sampler = ReleasedCEBPSampler("push")
     rb, data = buffer(sampler)
     priority = np_released_cebp(data, 0.1, np.array([1.05, 0.4, 0.4]), np.array([1.55, 1.11, np.inf]))
     assert len(set(np.round(priority, 6))) > 3  # the hand-made episodes are told apart
@@ -107,7 +109,7 @@ def test_cebp_released_frequencies_and_weights():
 
 
 def test_cebp_released_weights_after_warmup():
-    sampler = CEBPSampler("push", form="released")
+    sampler = ReleasedCEBPSampler("push")
     rb = TensorDictReplayBuffer(storage=EpisodeStorage(300 * T), sampler=sampler, dim_extend=0, batch_size=512)
     data = torch.cat([hand_made(6, seed=s) for s in range(50)])
     rb.extend(data)
@@ -115,6 +117,35 @@ def test_cebp_released_weights_after_warmup():
     batch = rb.sample()
     p = priority[batch["index"][:, 0].numpy()]
     np.testing.assert_allclose(batch["priority_weight"].numpy(), p.min() / p, rtol=1e-5)
+
+
+def np_initial_cebp(data, low, high):
+    touch = data["next", "touch"].double().numpy().sum(-1)
+    pos = np.concatenate([data["achieved_goal"][:, :1].double().numpy(), data["next", "achieved_goal"].double().numpy()], 1)
+    distance = np.linalg.norm(np.diff(pos, axis=1), axis=-1)
+    grip = data["next", "observation"][..., :3].double().numpy()
+    mask = np.all((grip >= low) & (grip <= high), -1)
+    return np.abs(touch * mask * distance).sum(1) + np.finfo(np.float32).eps
+
+
+def test_cebp_initial_frequencies_and_weights():
+    rb, data = buffer(InitialCEBPSampler("push"))
+    priority = np_initial_cebp(data, np.array([1.05, 0.4, 0.4]), np.array([1.55, 1.11, np.inf]))
+    assert len(set(np.round(priority, 6))) > 3
+    assert_frequencies(counts(rb), priority)
+    assert torch.equal(rb.sample()["priority_weight"], torch.ones(4096))
+
+
+def test_cebp_initial_weights_after_warmup():
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(300 * T), sampler=InitialCEBPSampler("push"), dim_extend=0,
+                                batch_size=512)
+    data = torch.cat([hand_made(6, seed=s) for s in range(50)])
+    rb.extend(data)
+    priority = np_initial_cebp(data, np.array([1.05, 0.4, 0.4]), np.array([1.55, 1.11, np.inf]))
+    batch = rb.sample()
+    p = priority[batch["index"][:, 0].numpy()]
+    w = p ** -0.7
+    np.testing.assert_allclose(batch["priority_weight"].numpy(), w / w.max(), rtol=1e-5)
 
 
 def test_cper_episode_and_step_frequencies():

@@ -14,8 +14,8 @@ from hydra.utils import instantiate
 from tensordict import TensorDict
 
 from torchrl_cebp.replay import HindsightRelabel
-from torchrl_cebp.training import ConfigError, load_checkpoint, train, validate_config
-from torchrl_cebp.training.config import warn_if_bf16_is_emulated
+from torchrl_cebp.training import ConfigError, load_checkpoint, load_policy, train, validate_config
+from torchrl_cebp.training.config import env_label, warn_if_bf16_is_emulated
 from torchrl_cebp.training.rollouts import RolloutWorker, Seeds, make_policy
 from torchrl_cebp.training.trainer import RelabelledTransitions, make_rollouts
 
@@ -29,7 +29,7 @@ TINY = [
     "replay.capacity=5000",
     "agent.hidden=[32,32]",
 ]
-SAMPLERS = ["her", "per", "ebp", "mep", "cper", "cebp", "cebp_released"]
+SAMPLERS = ["her", "per", "ebp", "mep", "cper", "cebp", "cebp_released", "cebp_initial"]
 
 
 def config(*overrides: str):
@@ -112,6 +112,28 @@ def test_refuses_to_overwrite_a_checkpoint_or_resume_another_run(tmp_path):
         train(config("epochs=1"), tmp_path)
     with pytest.raises(ConfigError, match="sampler="):
         train(config("sampler=cper", "resume=true"), tmp_path)
+
+
+@pytest.mark.parametrize("env", ["push_released", "pick_place_released", "slide_released"])
+def test_released_robot_trains_and_names_its_run_folder(tmp_path, env):
+    cfg = config(f"env={env}", "sampler=cebp_released", "epochs=1")
+    assert (cfg.env.goal_space, cfg.env.control, cfg.env.touch_ignores_table) == ("extended", "joint", True)
+    log = rows(train(cfg, tmp_path))
+    assert len(log) == 1 and log[0]["code_commit"]
+    policy = load_policy(tmp_path)
+    env_obs = 25 + 2 * cfg.env.touch_in_observation
+    td = TensorDict(observation=torch.zeros(env_obs), desired_goal=torch.zeros(3))
+    assert policy(td)["action"].shape == (8 if env == "pick_place_released" else 7,)
+    touch = "-touchobs" if cfg.env.touch_in_observation else ""
+    assert env_label(cfg.env) == f"{cfg.env.task}-extended-joint-tableblind{touch}"
+    assert "runs/${env_label:${env}}/" in (REPO / "conf" / "config.yaml").read_text()
+
+
+def test_wrong_control_is_listed_with_what_is_allowed():
+    with pytest.raises(ConfigError, match=r"env.control='cartesian': must be one of \['mocap', 'joint'\]"):
+        validate_config(config("env.control=cartesian"))
+    with pytest.raises(ConfigError, match="the Franka task has the mocap robot only"):
+        validate_config(config("env=franka_pick_place", "env.control=joint"))
 
 
 @pytest.mark.parametrize("sampler", SAMPLERS)

@@ -9,7 +9,9 @@ Example:
 from torchrl_cebp.envs.franka import FRANKA_TASK, FrankaPickPlaceEnv, make_franka
 from torchrl_cebp.envs.franka import register as register_franka
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, TASKS
-from torchrl_cebp.envs.torchrl_env import ALL_TASKS, TouchFetchEnv, make_env, make_goal_env
+from torchrl_cebp.envs.joint_control import CONTROLS
+from torchrl_cebp.envs.layout import FETCH_OBSERVATION, ObservationLayout
+from torchrl_cebp.envs.torchrl_env import ALL_TASKS, RobotOptions, TouchFetchEnv, make_env, make_goal_env
 from torchrl_cebp.envs.touch_fetch import gym_id, make_touch_fetch, register
 
 register()
@@ -17,10 +19,14 @@ register_franka()
 
 __all__ = [
     "ALL_TASKS",
+    "CONTROLS",
+    "FETCH_OBSERVATION",
     "FRANKA_TASK",
     "GOAL_SPACES",
     "TASKS",
     "FrankaPickPlaceEnv",
+    "ObservationLayout",
+    "RobotOptions",
     "TouchFetchEnv",
     "gym_id",
     "make_env",

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+
 import numpy as np
 import torch
 from gymnasium.utils import seeding
@@ -11,12 +14,50 @@ from torchrl.envs import EnvBase
 
 from torchrl_cebp.envs.franka import FRANKA_TASK, make_franka
 from torchrl_cebp.envs.goal_spaces import TASKS
+from torchrl_cebp.envs.joint_control import CONTROLS
 from torchrl_cebp.envs.touch_fetch import make_touch_fetch
 
 ALL_TASKS: tuple[str, ...] = (*TASKS, FRANKA_TASK)
 
 
-def make_goal_env(task: str, goal_space: str = "standard", **kwargs):
+@dataclass(frozen=True)
+class RobotOptions:
+    """Which Fetch robot a task runs on (ORIGINAL_CODE.md §3); the defaults are gymnasium-robotics' mocap Fetch.
+
+    ``control``: ``"mocap"`` (4-D Cartesian action) or ``"joint"`` (CPER's joint position control, the
+    released code's); ``touch_ignores_table``: the pads never feel the table (CPER's sensor bodies);
+    ``touch_in_observation``: the observation gains the step's touch and its running episode sum.
+
+    Example:
+        >>> RobotOptions(control="joint", touch_ignores_table=True).label
+        'joint-tableblind'
+        >>> RobotOptions().label
+        ''
+    """
+
+    control: str = "mocap"
+    touch_ignores_table: bool = False
+    touch_in_observation: bool = False
+
+    def __post_init__(self) -> None:
+        if self.control not in CONTROLS:
+            raise ValueError(f"Unknown control {self.control!r}; valid controls: {', '.join(CONTROLS)}")
+
+    @property
+    def label(self) -> str:
+        """A short name for folders: empty for the defaults, else e.g. ``joint-tableblind-touchobs``."""
+        parts = [self.control] if self.control != "mocap" else []
+        parts += ["tableblind"] if self.touch_ignores_table else []
+        parts += ["touchobs"] if self.touch_in_observation else []
+        return "-".join(parts)
+
+    @classmethod
+    def from_config(cls, env: Mapping) -> "RobotOptions":
+        """The options an env config (``conf/env/*.yaml``) names; keys it lacks keep their defaults."""
+        return cls(**{key: env[key] for key in ("control", "touch_ignores_table", "touch_in_observation") if key in env})
+
+
+def make_goal_env(task: str, goal_space: str = "standard", robot: RobotOptions = RobotOptions(), **kwargs):
     """The gymnasium touch-sensing goal env of any task, Fetch or Franka (``kwargs`` go to gymnasium-robotics).
 
     Example:
@@ -24,10 +65,12 @@ def make_goal_env(task: str, goal_space: str = "standard", **kwargs):
         100
     """
     if task == FRANKA_TASK:
+        if robot != RobotOptions():
+            raise ValueError(f"the Franka task has the mocap robot only (with its own touch pads); got {robot}")
         return make_franka(goal_space, **kwargs)
     if task not in TASKS:
         raise ValueError(f"Unknown task {task!r}; valid tasks: {', '.join(ALL_TASKS)}")
-    return make_touch_fetch(task, goal_space, **kwargs)
+    return make_touch_fetch(task, goal_space, **asdict(robot), **kwargs)
 
 _OBS_KEYS = ("observation", "achieved_goal", "desired_goal")
 
@@ -35,7 +78,7 @@ _OBS_KEYS = ("observation", "achieved_goal", "desired_goal")
 class TouchFetchEnv(EnvBase):
     """A touch-sensing Fetch task as a TorchRL env (build it with :func:`make_env`).
 
-    Root and ``"next"`` carry float32 ``observation`` [25], ``achieved_goal`` [3], ``desired_goal`` [3],
+    Root and ``"next"`` carry float32 ``observation`` [25] (27 with ``touch_in_observation``), ``achieved_goal`` [3], ``desired_goal`` [3],
     ``touch`` [2] (left, right; mean over the physics substeps) and bool ``is_success`` [1];
     ``"next"`` adds float32 ``reward`` [1] (0 on success else -1) and bool ``done``/``terminated``/``truncated`` [1]
     (truncated after ``max_episode_steps``, never terminated).
@@ -50,6 +93,8 @@ class TouchFetchEnv(EnvBase):
         torch.Size([3, 2])
         >>> TouchFetchEnv("push", num_envs=4).rollout(3)["next", "touch"].shape
         torch.Size([4, 3, 2])
+        >>> TouchFetchEnv("push", "extended", robot=RobotOptions(control="joint")).action_spec.shape
+        torch.Size([7])
     """
 
     def __init__(
@@ -59,14 +104,16 @@ class TouchFetchEnv(EnvBase):
         device: torch.device | str = "cpu",
         num_envs: int | None = None,
         render_size: tuple[int, int] | None = None,
+        robot: RobotOptions = RobotOptions(),
     ) -> None:
         batch_size = torch.Size([] if num_envs is None else [num_envs])
         super().__init__(device=device, batch_size=batch_size)
         render = {} if render_size is None else {"render_mode": "rgb_array", "width": render_size[0], "height": render_size[1]}
-        self._sims = [make_goal_env(task, goal_space, **render) for _ in range(max(1, batch_size.numel()))]
+        self._sims = [make_goal_env(task, goal_space, robot, **render) for _ in range(max(1, batch_size.numel()))]
         first = self._sims[0]
         self.task = task
         self.goal_space = goal_space
+        self.robot = robot
         self.max_episode_steps = first.max_episode_steps
         self.distance_threshold = first.distance_threshold
         self._steps = np.zeros(len(self._sims), dtype=np.int64)
@@ -90,7 +137,9 @@ class TouchFetchEnv(EnvBase):
             shape=batch_size,
             device=self.device,
         )
-        self.action_spec = Bounded(-1.0, 1.0, (*batch_size, 4), dtype=torch.float32, device=self.device)
+        self.action_spec = Bounded(
+            -1.0, 1.0, (*batch_size, first.action_space.shape[0]), dtype=torch.float32, device=self.device
+        )
         self.reward_spec = vector(1)
         self.done_spec = Composite(
             {key: flag() for key in ("done", "terminated", "truncated")}, shape=batch_size, device=self.device
@@ -185,10 +234,14 @@ def make_env(
     device: torch.device | str = "cpu",
     num_envs: int | None = None,
     render_size: tuple[int, int] | None = None,
+    control: str = "mocap",
+    touch_ignores_table: bool = False,
+    touch_in_observation: bool = False,
 ) -> EnvBase:
     """The TorchRL env of ``task`` (``pick_place``, ``push``, ``slide``, ``franka_pick_place``) under ``goal_space``.
 
-    Fetch tasks have the ``standard`` and ``extended`` goal spaces; the Franka task only ``standard``.
+    Fetch tasks have the ``standard`` and ``extended`` goal spaces and both robots (:class:`RobotOptions`:
+    ``control``, ``touch_ignores_table``, ``touch_in_observation``); the Franka task only ``standard`` and mocap.
 
     ``num_envs=n`` gives one env of batch size ``[n]`` stepping ``n`` simulations (seeded
     ``seed``, ``seed + 1``, ...); ``render_size=(width, height)`` enables ``env.render()``. Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.
@@ -198,8 +251,11 @@ def make_env(
         >>> td = env.rollout(env.max_episode_steps)
         >>> bool(td["next", "truncated"][-1])
         True
+        >>> make_env("pick_place", "extended", control="joint", touch_in_observation=True).action_spec.shape
+        torch.Size([8])
     """
-    env = TouchFetchEnv(task, goal_space, device=device, num_envs=num_envs, render_size=render_size)
+    robot = RobotOptions(control, touch_ignores_table, touch_in_observation)
+    env = TouchFetchEnv(task, goal_space, device=device, num_envs=num_envs, render_size=render_size, robot=robot)
     if seed is not None:
         env.set_seed(seed)
     return env

@@ -44,6 +44,50 @@ def add_touch_pad(
     )
 
 
+def add_table_blind_touch_pad(
+    spec: mujoco.MjSpec,
+    finger_body: str,
+    side: str,
+    half_size: tuple[float, float, float],
+    pos: tuple[float, float, float],
+    table_body: str = "table0",
+) -> None:
+    """Adds CPER's touch pad that never feels the table: a sensor body ``robot0:<side>_sensor`` on ``finger_body``.
+
+    The sensor body (as heavy as a Fetch finger link, CPER's inertial) carries a copy of the finger's
+    first geom, whose contacts with ``table_body`` are excluded, and the pad site and sensor of
+    :func:`add_touch_pad`. A touch sensor only counts contacts of its own body's geoms, so the finger
+    itself still stands on the table while the pad reads only the object and anything else.
+
+    Example:
+        >>> import os, gymnasium_robotics
+        >>> path = os.path.join(os.path.dirname(gymnasium_robotics.__file__), "envs/assets/fetch/push.xml")
+        >>> spec = mujoco.MjSpec.from_file(path)
+        >>> add_table_blind_touch_pad(spec, "robot0:l_gripper_finger_link", "left", (0.037, 0.00795, 0.0145), (0.001, 0.00795, 0))
+        >>> model = spec.compile()
+        >>> model.nsensor, float(model.body("robot0:left_sensor").mass[0])
+        (1, 4.0)
+    """
+    finger = spec.body(finger_body)
+    pad_geom = finger.geoms[0]
+    sensor_name = f"robot0:{side}_sensor"
+    sensor_body = finger.add_body(name=sensor_name, mass=4.0, ipos=[-0.01, 0.0, 0.0], inertia=[0.1, 0.1, 0.1])
+    sensor_body.add_geom(
+        name=f"{sensor_name}_geom",
+        type=pad_geom.type,
+        size=list(pad_geom.size),
+        pos=list(pad_geom.pos),
+        condim=pad_geom.condim,
+        friction=list(pad_geom.friction),
+        margin=pad_geom.margin,
+        solref=list(pad_geom.solref),
+        solimp=list(pad_geom.solimp),
+        rgba=[0.0, 0.0, 0.0, 0.0],  # the finger's own geom is the one drawn
+    )
+    spec.add_exclude(bodyname1=table_body, bodyname2=sensor_name)
+    add_touch_pad(spec, sensor_name, side, half_size, pos)
+
+
 class TouchReporting:
     """Mixin for a gymnasium-robotics MuJoCo env whose model has the two pad sensors of :func:`add_touch_pad`.
 

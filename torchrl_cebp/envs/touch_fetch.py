@@ -4,9 +4,15 @@ The touch sites and sensors are added to the XML that ships with gymnasium-robot
 ``mujoco.MjSpec``, so no robot XML is copied. Each step reports the touch of the left and right
 finger averaged over the physics substeps in ``info["touch"]`` (also ``env.touch``).
 
-Registered gymnasium ids: ``TouchFetch{PickAndPlace,Push,Slide}-v0`` (standard goal space) and
-``TouchFetch{PickAndPlace,Push,Slide}Extended-v0`` (CPER's goal space); they differ in
-``max_episode_steps``, hence one id per goal space.
+Two robots (ORIGINAL_CODE.md §3): ``control="mocap"``, gymnasium-robotics' Fetch (4-D Cartesian
+action, the CEBP code's Initial commit), and ``control="joint"``, CPER's joint-position-controlled
+Fetch (the released ICRA commit; :mod:`torchrl_cebp.envs.joint_control`). ``touch_ignores_table``
+puts the pads on CPER's sensor bodies, which never feel the table; ``touch_in_observation`` appends
+the step's touch and its running episode sum to the observation (:mod:`torchrl_cebp.envs.layout`).
+
+Registered gymnasium ids: ``TouchFetch{PickAndPlace,Push,Slide}[Joint][Extended]-v0``: one per
+control (the action spaces differ) and goal space (``max_episode_steps`` differs); the touch
+options are keyword arguments of ``gym.make``.
 """
 
 from __future__ import annotations
@@ -21,28 +27,47 @@ from gymnasium_robotics.envs.fetch.pick_and_place import MujocoFetchPickAndPlace
 from gymnasium_robotics.envs.fetch.push import MujocoFetchPushEnv
 from gymnasium_robotics.envs.fetch.slide import MujocoFetchSlideEnv
 
+from gymnasium import spaces
+
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, GoalSpace, get_goal_space
-from torchrl_cebp.envs.touch import TouchReporting, add_touch_pad
+from torchrl_cebp.envs.joint_control import CONTROLS, JointController, add_joint_actuators
+from torchrl_cebp.envs.layout import ObservationLayout
+from torchrl_cebp.envs.touch import TouchReporting, add_table_blind_touch_pad, add_touch_pad
 
 # CPER's pad geometry; the inner side of the right finger is its local -y, of the left one +y.
 _PAD_HALF_SIZE = (0.037, 0.00795, 0.0145)
 _FINGERS = (("left", "robot0:l_gripper_finger_link", 1.0), ("right", "robot0:r_gripper_finger_link", -1.0))
 
 
-def touch_spec(model_path: str, table_half_size: tuple[float, float] | None = None) -> mujoco.MjSpec:
+def touch_spec(
+    model_path: str,
+    table_half_size: tuple[float, float] | None = None,
+    *,
+    control: str = "mocap",
+    touch_ignores_table: bool = False,
+) -> mujoco.MjSpec:
     """Load a Fetch XML and add a visible touch-sensing box site on each finger's inner pad.
 
-    ``table_half_size`` resizes the table keeping its edge next to the robot in place.
+    ``table_half_size`` resizes the table keeping its edge next to the robot in place;
+    ``control="joint"`` makes it CPER's joint-controlled robot; ``touch_ignores_table`` puts the
+    pads on sensor bodies that never touch the table.
 
     Example:
         >>> import os, gymnasium_robotics
         >>> path = os.path.join(os.path.dirname(gymnasium_robotics.__file__), "envs/assets/fetch/push.xml")
         >>> touch_spec(path).compile().nsensor
         2
+        >>> touch_spec(path, control="joint", touch_ignores_table=True).compile().nu
+        7
     """
+    if control not in CONTROLS:
+        raise ValueError(f"unknown control {control!r}; valid controls: {', '.join(CONTROLS)}")
     spec = mujoco.MjSpec.from_file(model_path)
+    add_pad = add_table_blind_touch_pad if touch_ignores_table else add_touch_pad
     for side, body_name, inward in _FINGERS:
-        add_touch_pad(spec, body_name, side, _PAD_HALF_SIZE, (0.001, inward * _PAD_HALF_SIZE[1], 0.0))
+        add_pad(spec, body_name, side, _PAD_HALF_SIZE, (0.001, inward * _PAD_HALF_SIZE[1], 0.0))
+    if control == "joint":
+        add_joint_actuators(spec)
     if table_half_size is not None:
         table = spec.body("table0")
         top = table.geoms[0]
@@ -52,14 +77,28 @@ def touch_spec(model_path: str, table_half_size: tuple[float, float] | None = No
 
 
 class _TouchFetchMixin(TouchReporting):
-    """Touch sensing and goal-space settings on top of a gymnasium-robotics ``MujocoFetch*Env``."""
+    """Touch sensing, goal space and robot (mocap or joint control) on top of a gymnasium-robotics ``MujocoFetch*Env``."""
 
     task: str
 
-    def __init__(self, goal_space: str = "standard", **kwargs: Any) -> None:
+    def __init__(
+        self,
+        goal_space: str = "standard",
+        control: str = "mocap",
+        touch_ignores_table: bool = False,
+        touch_in_observation: bool = False,
+        **kwargs: Any,
+    ) -> None:
+        if control not in CONTROLS:
+            raise ValueError(f"unknown control {control!r}; valid controls: {', '.join(CONTROLS)}")
         self.goal_space = goal_space
+        self.control = control
+        self.touch_ignores_table = touch_ignores_table
+        self.layout = ObservationLayout(with_touch=touch_in_observation)
         self.space: GoalSpace = get_goal_space(self.task, goal_space)
         self.touch = np.zeros(2)
+        self.touch_total = 0.0
+        self.joint_controller: JointController | None = None
         super().__init__(**kwargs)
         # The parent constructors hard-code the standard values; the sampling methods read these attributes.
         self.target_offset = np.asarray(self.space.target_offset)
@@ -67,20 +106,52 @@ class _TouchFetchMixin(TouchReporting):
         self.target_range = self.space.target_range
         self.distance_threshold = self.space.distance_threshold
         self.max_episode_steps = self.space.max_episode_steps
-        EzPickle.__init__(self, goal_space=goal_space, **kwargs)
+        if self.joint_controller is not None:
+            self.action_space = spaces.Box(-1.0, 1.0, shape=(self.joint_controller.n_actions,), dtype=np.float32)
+        EzPickle.__init__(
+            self,
+            goal_space=goal_space,
+            control=control,
+            touch_ignores_table=touch_ignores_table,
+            touch_in_observation=touch_in_observation,
+            **kwargs,
+        )
 
     def _initialize_simulation(self) -> None:
         # As MujocoRobotEnv._initialize_simulation, but compiling the touch-augmented spec.
-        self.model = touch_spec(self.fullpath, self.space.table_half_size).compile()
+        spec = touch_spec(
+            self.fullpath, self.space.table_half_size, control=self.control, touch_ignores_table=self.touch_ignores_table
+        )
+        self.model = spec.compile()
         self.data = self._mujoco.MjData(self.model)
         self._model_names = self._utils.MujocoModelNames(self.model)
         self.locate_touch_sensors()
+        if self.control == "joint":
+            self.joint_controller = JointController(self.model, gripper_blocked=self.block_gripper)
         self.model.vis.global_.offwidth = self.width
         self.model.vis.global_.offheight = self.height
         self._env_setup(initial_qpos=self.initial_qpos)
         self.initial_time = self.data.time
         self.initial_qpos = np.copy(self.data.qpos)
         self.initial_qvel = np.copy(self.data.qvel)
+
+    def _env_setup(self, initial_qpos: dict) -> None:
+        if self.joint_controller is None:
+            return super()._env_setup(initial_qpos)
+        # CPER's initial joints instead of a mocap move; the steps let the object settle on the table.
+        for name, value in initial_qpos.items():
+            self._utils.set_joint_qpos(self.model, self.data, name, value)
+        self.joint_controller.set_initial_arm(self.data, rng=None)
+        self._mujoco.mj_forward(self.model, self.data)
+        for _ in range(10):
+            self._mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
+        self.initial_gripper_xpos = self._utils.get_site_xpos(self.model, self.data, "robot0:grip").copy()
+        self.height_offset = self._utils.get_site_xpos(self.model, self.data, "object0")[2]
+
+    def _set_action(self, action: np.ndarray) -> None:
+        if self.joint_controller is None:
+            return super()._set_action(action)
+        self.joint_controller.apply(self.data, action)
 
     def _mujoco_step(self, action: np.ndarray) -> None:
         # One substep at a time so the touch can be averaged over the whole env step.
@@ -89,21 +160,42 @@ class _TouchFetchMixin(TouchReporting):
             self._mujoco.mj_step(self.model, self.data)
             total += self.substep_touch()
         self.touch = total / self.n_substeps
+        self.touch_total += float(self.touch.sum())
 
     def _reset_sim(self) -> bool:
-        super()._reset_sim()
-        if self.space.shift_object_x:
-            # CPER shifts before rejecting starts within 0.1 of the gripper, so resample rather than translate.
-            gripper_xy = self.initial_gripper_xpos[:2]
-            object_xy = gripper_xy
-            while np.linalg.norm(object_xy - gripper_xy) < 0.1:
-                object_xy = gripper_xy + self.np_random.uniform(-self.obj_range, self.obj_range, size=2)
-                object_xy[0] += self.obj_range
-            object_qpos = self._utils.get_joint_qpos(self.model, self.data, "object0:joint")
-            object_qpos[:2] = object_xy
-            self._utils.set_joint_qpos(self.model, self.data, "object0:joint", object_qpos)
+        # As MujocoFetchEnv._reset_sim, with the joint robot's perturbed start and the goal space's object start.
+        self._mujoco.mj_resetData(self.model, self.data)
+        self.data.time = self.initial_time
+        self.data.qpos[:] = np.copy(self.initial_qpos)
+        self.data.qvel[:] = np.copy(self.initial_qvel)
+        if self.joint_controller is not None:
+            self.joint_controller.set_initial_arm(self.data, self.np_random)
             self._mujoco.mj_forward(self.model, self.data)
+            # Object start and goal are measured from where this reset put the gripper.
+            self.initial_gripper_xpos = self._utils.get_site_xpos(self.model, self.data, "robot0:grip").copy()
+        object_qpos = self._utils.get_joint_qpos(self.model, self.data, "object0:joint")
+        object_qpos[:2] = self._sample_object_xy()
+        self._utils.set_joint_qpos(self.model, self.data, "object0:joint", object_qpos)
+        self._mujoco.mj_forward(self.model, self.data)
+        self.touch = self.substep_touch().copy()
+        self.touch_total = 0.0
         return True
+
+    def _sample_object_xy(self) -> np.ndarray:
+        # At least 0.1 from the gripper; CPER's Slide shifts the draw before that test.
+        gripper_xy = self.initial_gripper_xpos[:2]
+        object_xy = gripper_xy
+        while np.linalg.norm(object_xy - gripper_xy) < 0.1:
+            object_xy = gripper_xy + self.np_random.uniform(-self.obj_range, self.obj_range, size=2)
+            if self.space.shift_object_x:
+                object_xy[0] += self.obj_range
+        return object_xy
+
+    def _get_obs(self) -> dict[str, np.ndarray]:
+        obs = super()._get_obs()
+        if self.layout.with_touch:
+            obs["observation"] = np.concatenate([obs["observation"], [self.touch.sum(), self.touch_total]])
+        return obs
 
     def _sample_goal(self) -> np.ndarray:
         if self.space.target_height is None:
@@ -157,45 +249,55 @@ TOUCH_FETCH_CLASSES: dict[str, type[_TouchFetchMixin]] = {
 
 
 def make_touch_fetch(task: str, goal_space: str = "standard", **kwargs: Any) -> _TouchFetchMixin:
-    """Build the (unwrapped) gymnasium touch-sensing Fetch env; ``kwargs`` go to gymnasium-robotics.
+    """Build the (unwrapped) gymnasium touch-sensing Fetch env.
+
+    ``kwargs``: ``control``, ``touch_ignores_table``, ``touch_in_observation``, and gymnasium-robotics' own.
 
     Example:
         >>> env = make_touch_fetch("push", "extended", render_mode="rgb_array", width=64, height=48)
         >>> env.reset(seed=1)[0]["observation"].shape
         (25,)
+        >>> env = make_touch_fetch("pick_place", "extended", control="joint", touch_in_observation=True)
+        >>> env.action_space.shape, env.reset(seed=1)[0]["observation"].shape
+        ((8,), (27,))
     """
     get_goal_space(task, goal_space)  # validates both names before any model is built
     return TOUCH_FETCH_CLASSES[task](goal_space=goal_space, **kwargs)
 
 
-def gym_id(task: str, goal_space: str = "standard") -> str:
-    """The registered gymnasium id of ``task`` under ``goal_space``.
+def gym_id(task: str, goal_space: str = "standard", control: str = "mocap") -> str:
+    """The registered gymnasium id of ``task`` under ``goal_space`` and ``control``.
 
     Example:
-        >>> gym_id("pick_place", "extended")
-        'TouchFetchPickAndPlaceExtended-v0'
+        >>> gym_id("pick_place", "extended"), gym_id("push", "extended", "joint")
+        ('TouchFetchPickAndPlaceExtended-v0', 'TouchFetchPushJointExtended-v0')
     """
     get_goal_space(task, goal_space)
+    if control not in CONTROLS:
+        raise ValueError(f"unknown control {control!r}; valid controls: {', '.join(CONTROLS)}")
     name = TOUCH_FETCH_CLASSES[task].__name__.removesuffix("Env")
-    return f"{name}{'Extended' if goal_space == 'extended' else ''}-v0"
+    return f"{name}{'Joint' if control == 'joint' else ''}{'Extended' if goal_space == 'extended' else ''}-v0"
 
 
 def register() -> None:
-    """Register every task x goal space with gymnasium (idempotent).
+    """Register every task x goal space x control with gymnasium (idempotent).
 
     Example:
         >>> import gymnasium as gym
         >>> register()
         >>> gym.spec("TouchFetchSlideExtended-v0").max_episode_steps
         70
+        >>> gym.make("TouchFetchPushJointExtended-v0", touch_ignores_table=True).action_space.shape
+        (7,)
     """
     for task, cls in TOUCH_FETCH_CLASSES.items():
         for name in GOAL_SPACES:
-            env_id = gym_id(task, name)
-            if env_id not in gym.registry:
-                gym.register(
-                    id=env_id,
-                    entry_point=f"{__name__}:{cls.__name__}",
-                    kwargs={"goal_space": name},
-                    max_episode_steps=get_goal_space(task, name).max_episode_steps,
-                )
+            for control in CONTROLS:
+                env_id = gym_id(task, name, control)
+                if env_id not in gym.registry:
+                    gym.register(
+                        id=env_id,
+                        entry_point=f"{__name__}:{cls.__name__}",
+                        kwargs={"goal_space": name, "control": control},
+                        max_episode_steps=get_goal_space(task, name).max_episode_steps,
+                    )

@@ -59,12 +59,13 @@ def set_rng_state(state: dict[str, Any]) -> None:
 _ACTOR_PREFIX = "actor_network_params."
 
 
-def load_policy(checkpoint: str | Path, obs_dim: int = 25, goal_dim: int = 3, action_dim: int = 4) -> TensorDictSequential:
+def load_policy(checkpoint: str | Path) -> TensorDictSequential:
     """The deterministic policy (normaliser, then actor) of a checkpoint written by ``torchrl_cebp.training``.
 
     ``checkpoint`` is the ``checkpoint.pt`` file or the run directory holding it. The actor's weights
-    are the loss's ``actor_network_params`` (not the delayed target copy) and its hidden sizes come
-    from the checkpoint's config.
+    are the loss's ``actor_network_params`` (not the delayed target copy); its hidden sizes come
+    from the checkpoint's config, the observation, goal and action sizes from the saved tensors
+    (the joint robot acts in 7 or 8 dimensions, and observes touch on some tasks).
 
     Example:
         >>> policy = load_policy("runs/franka_pick_place-standard/cebp/default/seed0")  # doctest: +SKIP
@@ -79,10 +80,13 @@ def load_policy(checkpoint: str | Path, obs_dim: int = 25, goal_dim: int = 3, ac
     missing = {"config", "loss", "normalizer"} - set(state)
     if missing:
         raise ValueError(f"{str(path)!r} is not a training checkpoint: it lacks {sorted(missing)}.")
+    actor_state = {
+        key.removeprefix(_ACTOR_PREFIX): value for key, value in state["loss"].items() if key.startswith(_ACTOR_PREFIX)
+    }
+    weights = [value for key, value in actor_state.items() if key.endswith("weight")]
+    obs_dim, goal_dim = state["normalizer"]["obs.sum"].numel(), state["normalizer"]["goal.sum"].numel()
     normalizer = ObsGoalNormalizer(obs_dim, goal_dim)
     normalizer.load_state_dict(state["normalizer"])
-    actor = make_actor(obs_dim + goal_dim, action_dim, state["config"]["agent"]["hidden"])
-    actor.load_state_dict(
-        {key.removeprefix(_ACTOR_PREFIX): value for key, value in state["loss"].items() if key.startswith(_ACTOR_PREFIX)}
-    )
+    actor = make_actor(obs_dim + goal_dim, weights[-1].shape[0], state["config"]["agent"]["hidden"])
+    actor.load_state_dict(actor_state)
     return TensorDictSequential(normalizer, actor).eval()

@@ -9,7 +9,7 @@ from numbers import Real
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from torchrl_cebp.envs import ALL_TASKS, GOAL_SPACES
+from torchrl_cebp.envs import ALL_TASKS, CONTROLS, FRANKA_TASK, GOAL_SPACES, RobotOptions
 from torchrl_cebp.replay.her import STRATEGIES
 from torchrl_cebp.training.metrics import LOGGERS
 
@@ -20,6 +20,26 @@ PRECISIONS = ("fp32", "bf16")
 # ``${mul:a,b,...}`` lets a config derive a count, e.g. PER's beta-annealing horizon.
 if not OmegaConf.has_resolver("mul"):
     OmegaConf.register_new_resolver("mul", lambda *factors: math.prod(factors))
+
+
+def env_label(env: DictConfig) -> str:
+    """The run folder's env part: ``<task>-<goal_space>``, then the robot's label unless it is the default mocap Fetch.
+
+    Examples:
+        >>> from omegaconf import OmegaConf
+        >>> env_label(OmegaConf.create({"task": "push", "goal_space": "extended", "control": "joint",
+        ...                             "touch_ignores_table": True, "touch_in_observation": False}))
+        'push-extended-joint-tableblind'
+        >>> env_label(OmegaConf.create({"task": "push", "goal_space": "standard"}))
+        'push-standard'
+    """
+    label = RobotOptions.from_config(env).label
+    return f"{env.task}-{env.goal_space}" + (f"-{label}" if label else "")
+
+
+# ``${env_label:${env}}`` names the run folders (conf/config.yaml), so that the robots do not share one.
+if not OmegaConf.has_resolver("env_label"):
+    OmegaConf.register_new_resolver("env_label", env_label)
 
 
 class ConfigError(ValueError):
@@ -70,6 +90,11 @@ def validate_config(cfg: DictConfig) -> None:
     one_of("device", DEVICES)
     one_of("env.task", ALL_TASKS)
     one_of("env.goal_space", GOAL_SPACES)
+    one_of("env.control", CONTROLS)
+    for key in ("env.touch_ignores_table", "env.touch_in_observation"):
+        check(key, lambda v: isinstance(v, bool), "true or false")
+    if OmegaConf.select(cfg, "env.task") == FRANKA_TASK and OmegaConf.select(cfg, "env.control") == "joint":
+        errors.append("  env.control='joint': the Franka task has the mocap robot only; use env.control=mocap")
     one_of("env_backend", ENV_BACKENDS)
     one_of("precision", PRECISIONS)
     one_of("logger", LOGGERS)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +32,23 @@ def make_logger(kind: str, run_dir: str | Path) -> Logger | None:
     run_dir = Path(run_dir)
     extra = {"wandb_kwargs": {"project": "torchrl-cebp"}} if kind == "wandb" else {}
     return get_logger(kind, logger_name=str(run_dir / "logs"), experiment_name=run_dir.name, **extra)
+
+
+def code_version() -> str:
+    """The git commit of the package's checkout (``+dirty`` with uncommitted changes), or ``unknown`` outside git.
+
+    Example:
+        >>> len(code_version()) > 0
+        True
+    """
+    try:
+        out = subprocess.run(
+            ["git", "describe", "--always", "--dirty=+dirty", "--abbrev=12"],
+            cwd=Path(__file__).parent, capture_output=True, text=True, timeout=10, check=True,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return out.stdout.strip() or "unknown"
 
 
 class EpochCsv:

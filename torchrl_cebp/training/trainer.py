@@ -9,8 +9,10 @@ process collects the next cycle's episodes while this one's updates run.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
+import os
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -29,7 +31,7 @@ from torchrl.objectives import SoftUpdate
 from tqdm import tqdm
 
 from torchrl_cebp.agents import HERDDPGLoss, make_critic
-from torchrl_cebp.envs import make_env
+from torchrl_cebp.envs import RobotOptions, make_env
 from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
 from torchrl_cebp.training.checkpoint import (
     has_checkpoint,
@@ -45,7 +47,7 @@ from torchrl_cebp.training.config import (
     validate_config,
     warn_if_bf16_is_emulated,
 )
-from torchrl_cebp.training.metrics import EpochCsv, make_logger
+from torchrl_cebp.training.metrics import EpochCsv, code_version, make_logger
 from torchrl_cebp.training.rollouts import RolloutWorker, Rollouts, Seeds, make_policy
 
 CSV_NAME = "progress.csv"
@@ -64,7 +66,7 @@ class RelabelledTransitions:
     (independently of how the sampler draws from the buffer).
 
     Example:
-        >>> from torchrl_cebp.envs import make_env
+        >>> from torchrl_cebp.envs import RobotOptions, make_env
         >>> env = make_env("push", num_envs=2)
         >>> feed = RelabelledTransitions(HindsightRelabel(env.compute_reward), n_episodes=2, episode_steps=50)
         >>> feed(env.rollout(50))["desired_goal"].shape
@@ -96,11 +98,17 @@ def evaluate_success_rate(env: EnvBase, policy: TensorDictSequential, n_episodes
     return torch.cat(successes)[:n_episodes].float().mean().item()
 
 
+def make_task_env(cfg: DictConfig, **kwargs) -> EnvBase:
+    """The configured task's env: ``cfg.env``'s task, goal space and robot; ``kwargs`` go to :func:`make_env`."""
+    robot = RobotOptions.from_config(cfg.env)
+    return make_env(cfg.env.task, cfg.env.goal_space, **dataclasses.asdict(robot), **kwargs)
+
+
 def make_batched_env(cfg: DictConfig, n_envs: int, device: torch.device | str = "cpu") -> EnvBase:
     """``n_envs`` simulations of the task: stepped in turn by one env, or one process each (``env_backend``)."""
     if cfg.env_backend == "parallel":
-        return ParallelEnv(n_envs, functools.partial(make_env, cfg.env.task, cfg.env.goal_space, device=device))
-    return make_env(cfg.env.task, cfg.env.goal_space, device=device, num_envs=n_envs)
+        return ParallelEnv(n_envs, functools.partial(make_task_env, cfg, device=device))
+    return make_task_env(cfg, device=device, num_envs=n_envs)
 
 
 def make_rollouts(cfg: DictConfig, dims: tuple[int, int, int], episode_steps: int) -> Rollouts:
@@ -147,7 +155,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     # Environments: the training episodes come from a copy of the policy (in a worker process
     # with overlap_collection), the test episodes from this one. Both run on the CPU.
     n_envs = cfg.rollouts_per_cycle * cfg.workers
-    spec_env = make_env(cfg.env.task, cfg.env.goal_space)
+    spec_env = make_task_env(cfg)
     episode_steps = spec_env.max_episode_steps
     dims = (
         spec_env.observation_spec["observation"].shape[-1],
@@ -199,6 +207,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         set_rng_state(state["rng"])
         start_epoch, wall_before = state["epoch"] + 1, state["wall_s"]
     csv_log = EpochCsv(run_dir / CSV_NAME, start_epoch)
+    commit = code_version()
     logger = make_logger(cfg.logger, run_dir)
     run_start = time.perf_counter()
 
@@ -209,7 +218,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         # so a resumed run repeats an uninterrupted one, with or without overlap.
         rollouts.submit(collection_weights(), Seeds(derive_seed(cfg.seed, epoch, 0), derive_seed(cfg.seed, epoch, 2)))
         totals: dict[str, torch.Tensor] = defaultdict(float)
-        collect_s = update_s = 0.0
+        collect_s = update_s = load = 0.0
         for cycle in range(cfg.cycles_per_epoch):
             tick = time.perf_counter()
             episodes = rollouts.result()
@@ -247,6 +256,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
                     totals["is_weight_min"] += batch["priority_weight"].min()
             target_updater.step()
             update_s += time.perf_counter() - tick
+            load += os.getloadavg()[0] / cfg.cycles_per_epoch
             if not cfg.overlap_collection and next_cycle:
                 rollouts.submit(collection_weights())
 
@@ -274,8 +284,10 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
             "test_s": test_s,
             "epoch_s": epoch_s,
             "wall_s": wall_s,
+            # Above the runs' own thread count, something else shared the cores and inflated epoch_s.
+            "load_avg": load,
         }
-        csv_log.write(row)
+        csv_log.write({**row, "code_commit": commit})
         if logger is not None:
             for key, value in row.items():
                 logger.log_scalar(key, value, step=epoch)

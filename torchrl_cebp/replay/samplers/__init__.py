@@ -1,6 +1,6 @@
 """One TorchRL :class:`~torchrl.data.replay_buffers.Sampler` per replay method of the CEBP paper."""
 from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler
-from torchrl_cebp.replay.samplers.cebp import CEBPSampler
+from torchrl_cebp.replay.samplers.cebp import CEBPSampler, InitialCEBPSampler, ReleasedCEBPSampler
 from torchrl_cebp.replay.samplers.cper import CPERSampler
 from torchrl_cebp.replay.samplers.ebp import EBPSampler
 from torchrl_cebp.replay.samplers.mep import MEPSampler
@@ -12,7 +12,9 @@ __all__ = [
     "CPERSampler",
     "EBPSampler",
     "EpisodePrioritySampler",
+    "InitialCEBPSampler",
     "MEPSampler",
     "PERSampler",
+    "ReleasedCEBPSampler",
     "UniformEpisodeSampler",
 ]
