@@ -89,6 +89,7 @@ def test_touch_in_observation_is_the_step_touch_and_its_running_sum(control):
     env = make_env("pick_place", "extended", control=control, touch_ignores_table=False, touch_in_observation=True, seed=3)
     layout = ObservationLayout(with_touch=True)
     assert env.observation_spec["observation"].shape == (layout.size,)
+    torch.manual_seed(2)  # random actions under which both robots touch something
     rollout = env.rollout(50)
     step_touch = rollout["next", "touch"].sum(-1)
     assert step_touch.sum() > 0  # the unblinded pads touch something in 50 random steps

@@ -6,6 +6,8 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_cebp.envs.layout import FETCH_OBSERVATION as OBS
+
 __all__ = ["ScriptedPickPlace"]
 
 
@@ -22,7 +24,9 @@ class ScriptedPickPlace(TensorDictModuleBase):
 
     Example:
         >>> from tensordict import TensorDict
-        >>> obs = torch.zeros(25); obs[3:6] = torch.tensor([0.1, 0.0, 0.0]); obs[9:11] = 0.04
+        >>> from torchrl_cebp.envs import FETCH_OBSERVATION as OBS
+        >>> obs = torch.zeros(OBS.size); obs[OBS.object_position] = torch.tensor([0.1, 0.0, 0.0])
+        >>> obs[OBS.finger_positions] = 0.04
         >>> td = ScriptedPickPlace()(TensorDict(observation=obs, desired_goal=torch.zeros(3)))
         >>> td["action"].tolist()
         [1.0, 0.0, 1.0, 1.0]
@@ -36,7 +40,7 @@ class ScriptedPickPlace(TensorDictModuleBase):
     def _act(self, obs: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         if not torch.isfinite(obs).all():
             return torch.zeros(4)
-        grip, cube, width = obs[0:3], obs[3:6], obs[9] + obs[10]
+        grip, cube, width = obs[OBS.gripper_position], obs[OBS.object_position], OBS.gripper_opening(obs)
         at_cube = torch.linalg.vector_norm(cube - grip) < self.tolerance
         if at_cube and width > self.closed_width:
             target, gripper = grip, -1.0  # closing: stay put until the fingers are on the cube

@@ -19,6 +19,7 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from torchrl_cebp.envs.franka import FrankaLayout, sample_goal
+from torchrl_cebp.envs.layout import FETCH_OBSERVATION
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource
 from torchrl_cebp.sim2real.perception import CubePerception, PerceptionStatus
 from torchrl_cebp.sim2real.robot import RobotBackend, RobotState
@@ -96,15 +97,21 @@ def fetch_observation(state: RobotState, cube: np.ndarray, previous: tuple[Robot
         >>> fetch_observation(state, np.array([0.1, 0.0, 0.0]), None, 0.04).shape
         (25,)
     """
-    grip_velp = state.grip_vel * dt
     if previous is None:
         cube_velp = np.zeros(3)
     else:
         cube_velp = (cube - previous[1]) - (state.grip_pos - previous[0].grip_pos)
-    return np.concatenate(
-        [state.grip_pos, cube, cube - state.grip_pos, state.finger_pos, np.zeros(3), cube_velp, np.zeros(3),
-         grip_velp, state.finger_vel * dt]
-    ).astype(np.float32)
+    return FETCH_OBSERVATION.pack(
+        gripper_position=state.grip_pos,
+        object_position=cube,
+        object_relative_position=cube - state.grip_pos,
+        finger_positions=state.finger_pos,
+        object_rotation=np.zeros(3),
+        object_velocity=cube_velp,
+        object_angular_velocity=np.zeros(3),
+        gripper_velocity=state.grip_vel * dt,
+        finger_velocities=state.finger_vel * dt,
+    )
 
 
 class RealLoopEnv(EnvBase):
@@ -164,7 +171,7 @@ class RealLoopEnv(EnvBase):
             return Categorical(2, (1,), dtype=torch.bool)
 
         self.observation_spec = Composite(
-            observation=Unbounded((25,), dtype=torch.float32),
+            observation=Unbounded((FETCH_OBSERVATION.size,), dtype=torch.float32),
             achieved_goal=Unbounded((3,), dtype=torch.float32),
             desired_goal=Unbounded((3,), dtype=torch.float32),
             cube_position=Unbounded((3,), dtype=torch.float32),
@@ -257,7 +264,7 @@ class RealLoopEnv(EnvBase):
             self.backend.stop()
             self._previous = None
             out = self._pack(
-                np.full(25, np.nan), np.full(3, np.nan), PerceptionStatus.MARKERS, SafetyStatus.CAMERA_LOST, clamped
+                np.full(FETCH_OBSERVATION.size, np.nan), np.full(3, np.nan), PerceptionStatus.MARKERS, SafetyStatus.CAMERA_LOST, clamped
             )
             terminated = torch.ones(1, dtype=torch.bool)
         out["reward"] = torch.tensor([0.0 if bool(out["is_success"]) else -1.0])

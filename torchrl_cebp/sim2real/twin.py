@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 from torchrl_cebp.envs.franka import FrankaLayout, FrankaPickPlaceEnv
+from torchrl_cebp.envs.layout import FETCH_OBSERVATION as OBS
 from torchrl_cebp.sim2real.calibration import TableCalibration, aruco_dictionary
 from torchrl_cebp.sim2real.camera import FrameSource
 from torchrl_cebp.sim2real.robot import RobotBackend, RobotState
@@ -166,7 +167,12 @@ class MuJoCoTwinBackend(RobotBackend):
         obs = self.env._get_obs()["observation"]
         dt = self.env.dt
         # Fetch's observation stores velocities multiplied by the step time.
-        return RobotState(grip_pos=obs[0:3], grip_vel=obs[20:23] / dt, finger_pos=obs[9:11], finger_vel=obs[23:25] / dt)
+        return RobotState(
+            grip_pos=obs[OBS.gripper_position],
+            grip_vel=obs[OBS.gripper_velocity] / dt,
+            finger_pos=obs[OBS.finger_positions],
+            finger_vel=obs[OBS.finger_velocities] / dt,
+        )
 
     def move(self, delta_xyz: np.ndarray, gripper: float) -> None:
         if self.stopped:
