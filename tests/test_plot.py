@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from torchrl_cebp.plot import collect_sweep, draw_sweep, main, quartiles
+from torchrl_cebp.plot import collect_sweep, draw_sweep, iqm_band, main
 
 
 def write_run(folder, success):
@@ -50,11 +50,19 @@ def test_a_configuration_keeps_its_colour_and_fractions_share_one_scale(tmp_path
     assert not unbounded[0].get_shared_y_axes().joined(*unbounded)
 
 
-def test_quartiles_over_seeds():
-    q25, median, q75 = quartiles([np.array([0.0, 0.2]), np.array([0.4, 0.6]), np.array([0.8, 1.0])])
-    np.testing.assert_allclose(median, [0.4, 0.6])
-    np.testing.assert_allclose(q25, [0.2, 0.4])
-    np.testing.assert_allclose(q75, [0.6, 0.8])
+def test_iqm_band_over_the_seeds_that_reached_each_epoch():
+    mean, low, high, seeds = iqm_band([np.array([0.0, 0.2, 0.3]), np.array([0.4, 0.6]), np.array([0.8, 1.0])])
+    np.testing.assert_allclose(mean, [0.4, 0.6, 0.3])  # three seeds: the IQM trims none
+    np.testing.assert_allclose(low, [0.0, 0.2, 0.3])  # each extreme resample has probability 1/27 > 2.5%
+    np.testing.assert_allclose(high, [0.8, 1.0, 0.3])
+    assert seeds.tolist() == [3, 3, 1]
+
+
+def test_legend_names_the_seeds_behind_each_stretch_of_a_curve(tmp_path):
+    write_run(tmp_path / "push-standard/her/paper/seed0", [0.0, 0.1, 0.2, 0.5])
+    write_run(tmp_path / "push-standard/her/paper/seed1", [0.0, 0.3])
+    (ax,) = draw_sweep(tmp_path).axes
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["her/paper (2 seeds to epoch 2, 1 seed to 4)"]
 
 
 def test_errors_name_the_problem(tmp_path):
@@ -65,14 +73,14 @@ def test_errors_name_the_problem(tmp_path):
         main([str(tmp_path), "--metric", "success"])
 
 
-def test_table_gives_median_and_quartiles_after_n_epochs(tmp_path, capsys):
+def test_table_gives_iqm_and_bootstrap_interval_after_n_epochs(tmp_path, capsys):
     for seed, success in enumerate([[0.0, 0.2], [0.0, 0.4], [0.0, 0.6]]):
         write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", success)
     write_run(tmp_path / "push-extended/her/paper/seed0", [0.1])
     main([str(tmp_path), "--table", "1", "2"])
     rows = {line.split(" | ")[1]: line for line in capsys.readouterr().out.splitlines() if line.startswith("| push")}
     # the preset every configuration shares goes to the task column
-    assert rows["cebp"] == "| push-extended (paper) | cebp | 3 | 0.00 [0.00, 0.00] | 0.40 [0.30, 0.50] | 0.1 |"
+    assert rows["cebp"] == "| push-extended (paper) | cebp | 3 | 0.00 [0.00, 0.00] | 0.40 [0.20, 0.60] | 0.1 |"
     assert rows["her"] == "| push-extended (paper) | her | 1 | 0.10 [0.10, 0.10] | - | 0.0 |"
     with pytest.raises(ValueError, match="start at 1"):
         main([str(tmp_path), "--table", "0"])
@@ -85,9 +93,22 @@ def test_table_mean_over_a_window_of_epochs(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "| task | configuration | seeds | after 3 epochs | mean over epochs 2-3 | training hours |" in out
     # seeds 0 and 1 reached epoch 3: their means over epochs 2-3 are 0.3 and 0.6
-    assert "| push-extended | cebp/paper | 3 | 0.60 [0.50, 0.70] (2 seeds) | 0.45 [0.38, 0.53] (2 seeds) | 0.1 |" in out
+    assert "| push-extended | cebp/paper | 3 | 0.60 [0.40, 0.80] (2 seeds) | 0.45 [0.30, 0.60] (2 seeds) | 0.1 |" in out
     with pytest.raises(ValueError, match=r"mean_over=\(3, 2\)"):
         main([str(tmp_path), "--table", "3", "--mean-over", "3", "2"])
     with pytest.raises(SystemExit):
         main([str(tmp_path), "--mean-over", "2", "3"])
     assert "give --table too" in capsys.readouterr().err
+
+
+def test_table_probability_of_improvement_over_her(tmp_path, capsys):
+    for seed, (her, cebp) in enumerate([(0.1, 0.3), (0.2, 0.3), (0.4, 0.5)]):
+        write_run(tmp_path / f"push-extended/her/paper/seed{seed}", [0.0, her])
+        write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", [0.0, cebp])
+    main([str(tmp_path), "--table", "2", "--improvement-at", "2"])
+    rows = {line.split(" | ")[1]: line for line in capsys.readouterr().out.splitlines() if line.startswith("| push")}
+    # cebp beats her in (3 + 3 + 1) of 9 pairs, ties none: 7/9
+    assert "| 0.78 [" in rows["cebp"]
+    assert "(baseline)" in rows["her"]
+    with pytest.raises(SystemExit):
+        main([str(tmp_path), "--improvement-at", "2"])

@@ -1,9 +1,13 @@
-"""Success curves of a sweep: median and interquartile range over seeds, per sampler and task.
+"""Success curves of a sweep: interquartile mean (IQM) over seeds with a 95% bootstrap interval, per sampler and task.
 
     python -m torchrl_cebp.plot runs                      # writes runs/test_success.png
     python -m torchrl_cebp.plot runs --out fig.png --metric test_success --title "FetchPush"
     python -m torchrl_cebp.plot runs --table 5 10         # and prints a Markdown table after 5 and 10 epochs
+    python -m torchrl_cebp.plot runs --table 5 10 --improvement-at 10   # and P(sampler > her) after 10 epochs
     python -m torchrl_cebp.plot runs --table 10 --mean-over 6 10   # and each seed's mean over epochs 6-10
+
+The statistics follow rliable's conventions (:mod:`torchrl_cebp.stats`): IQM, stratified-bootstrap
+95% confidence intervals, and the probability of improvement over a baseline configuration.
 
 A run is any folder holding a ``progress.csv``; runs are grouped by their parent folder (the
 seeds of one configuration), and one panel is drawn per top-level folder under the sweep root
@@ -22,6 +26,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 import numpy as np  # noqa: E402
+
+from torchrl_cebp.stats import (  # noqa: E402
+    iqm,
+    probability_of_improvement,
+    probability_of_improvement_ci,
+    stratified_bootstrap_ci,
+)
 
 CSV_NAME = "progress.csv"
 
@@ -75,19 +86,53 @@ def short_labels(panel: str, labels: list[str]) -> tuple[str, dict[str, str]]:
     return title, short
 
 
-def quartiles(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """25th, 50th and 75th percentiles per epoch over the seeds that reached that epoch.
+def padded(curves: list[np.ndarray]) -> np.ndarray:
+    """The seeds' curves as rows ``[seeds, epochs]``, NaN after the last epoch a seed reached."""
+    length = max(len(c) for c in curves)
+    out = np.full((len(curves), length), np.nan)
+    for i, curve in enumerate(curves):
+        out[i, : len(curve)] = curve
+    return out
+
+
+def iqm_band(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per epoch, over the seeds that reached it: the IQM, its 95% bootstrap interval and the seed count.
 
     Examples:
-        >>> q25, median, q75 = quartiles([np.array([0.0, 1.0]), np.array([1.0])])
-        >>> median.tolist()
-        [0.5, 1.0]
+        >>> mean, low, high, seeds = iqm_band([np.array([0.0, 1.0]), np.array([1.0])])
+        >>> mean.tolist(), seeds.tolist()
+        ([0.5, 1.0], [2, 1])
     """
-    length = max(len(c) for c in curves)
-    padded = np.full((len(curves), length), np.nan)
-    for i, curve in enumerate(curves):
-        padded[i, : len(curve)] = curve
-    return tuple(np.nanpercentile(padded, q, axis=0) for q in (25, 50, 75))
+    table = padded(curves)
+    mean, low, high, seeds = (np.empty(table.shape[1]) for _ in range(4))
+    for epoch, column in enumerate(table.T):
+        values = column[~np.isnan(column)]
+        mean[epoch] = iqm(values)
+        low[epoch], high[epoch] = stratified_bootstrap_ci(values)
+        seeds[epoch] = values.size
+    return mean, low, high, seeds.astype(int)
+
+
+def seed_coverage(seeds_per_epoch: np.ndarray) -> str:
+    """How many seeds each stretch of epochs (counted from 1) averages, for the legend.
+
+    Examples:
+        >>> seed_coverage(np.array([3, 3, 3, 1]))
+        '3 seeds to epoch 3, 1 seed to 4'
+        >>> seed_coverage(np.array([2, 2]))
+        '2 seeds'
+    """
+    stretches: list[tuple[int, int]] = []
+    for epoch, n in enumerate(map(int, seeds_per_epoch), start=1):
+        if stretches and stretches[-1][0] == n:
+            stretches[-1] = (n, epoch)
+        else:
+            stretches.append((n, epoch))
+    if len(stretches) == 1:
+        return seed_count(stretches[0][0])
+    return seed_count(stretches[0][0]) + f" to epoch {stretches[0][1]}" + "".join(
+        f", {seed_count(n)} to {last}" for n, last in stretches[1:]
+    )
 
 
 def seed_count(n: int) -> str:
@@ -96,7 +141,10 @@ def seed_count(n: int) -> str:
 
 
 def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None = None) -> plt.Figure:
-    """One panel per task, one median line and interquartile band per configuration.
+    """One panel per task, one IQM line and 95% bootstrap band per configuration.
+
+    The legend names how many seeds each stretch of a curve averages, so a tail that only some
+    seeds reached does not read as all of them.
 
     A configuration keeps its colour in every panel. A metric whose values all lie in [0, 1] (a success
     rate, a fraction) is drawn on one shared scale, so that a task still near zero looks it.
@@ -117,14 +165,14 @@ def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None
     for ax, (panel, curves_by_label) in zip(axes[0], sorted(groups.items())):
         panel_title, short = panels[panel]
         for label, curves in sorted(curves_by_label.items()):
-            q25, median, q75 = quartiles(curves)
-            epochs = np.arange(1, len(median) + 1)
-            ax.plot(epochs, median, color=colour[label], label=f"{short[label]} ({seed_count(len(curves))})")
-            ax.fill_between(epochs, q25, q75, color=colour[label], alpha=0.2)
+            mean, low, high, seeds = iqm_band(curves)
+            epochs = np.arange(1, len(mean) + 1)
+            ax.plot(epochs, mean, color=colour[label], label=f"{short[label]} ({seed_coverage(seeds)})")
+            ax.fill_between(epochs, low, high, color=colour[label], alpha=0.2)
         ax.set_title(title if title is not None and len(groups) == 1 else panel_title)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epochs trained")
-        ax.set_ylabel(metric.replace("_", " "))
+        ax.set_ylabel(f"{metric.replace('_', ' ')} (IQM, 95% CI)")
         ax.yaxis.set_tick_params(labelleft=True)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
@@ -145,20 +193,33 @@ def plot_sweep(
     return out
 
 
-def median_cell(per_seed: list[float], seeds_in_total: int) -> str:
-    """``median [25th, 75th percentile]`` of the seeds' values, naming how many when not all seeds count.
+def iqm_cell(per_seed: list[float], seeds_in_total: int) -> str:
+    """``IQM [95% CI]`` of the seeds' values, naming how many when not all seeds count.
 
     Examples:
-        >>> median_cell([0.1, 0.3], 3)
-        '0.20 [0.15, 0.25] (2 seeds)'
-        >>> median_cell([], 3)
+        >>> iqm_cell([0.1, 0.3], 3)
+        '0.20 [0.10, 0.30] (2 seeds)'
+        >>> iqm_cell([], 3)
         '-'
     """
     if not per_seed:
         return "-"
-    q25, median, q75 = np.percentile(per_seed, [25, 50, 75])
+    low, high = stratified_bootstrap_ci(per_seed)
     seeds = f" ({seed_count(len(per_seed))})" if len(per_seed) < seeds_in_total else ""
-    return f"{median:.2f} [{q25:.2f}, {q75:.2f}]{seeds}"
+    return f"{iqm(per_seed):.2f} [{low:.2f}, {high:.2f}]{seeds}"
+
+
+def improvement_cell(per_seed: list[float], baseline: list[float]) -> str:
+    """``P(X > baseline) [95% CI]`` over the seeds' values, or ``-`` when either side has none.
+
+    Examples:
+        >>> improvement_cell([0.5, 0.6], [0.1, 0.2])
+        '1.00 [1.00, 1.00]'
+    """
+    if not per_seed or not baseline:
+        return "-"
+    low, high = probability_of_improvement_ci(per_seed, baseline)
+    return f"{probability_of_improvement(per_seed, baseline):.2f} [{low:.2f}, {high:.2f}]"
 
 
 def summary_table(
@@ -166,30 +227,39 @@ def summary_table(
     after_epochs: list[int],
     metric: str = "test_success",
     mean_over: tuple[int, int] | None = None,
+    improvement_at: int | None = None,
+    baseline: str = "her",
 ) -> str:
-    """A Markdown table: per task and configuration, the median [25th, 75th percentile] of ``metric``
-    after each of ``after_epochs`` epochs over the seeds that got there, and the runs' training hours.
+    """A Markdown table: per task and configuration, the IQM [95% bootstrap CI] of ``metric`` after each
+    of ``after_epochs`` epochs over the seeds that got there, and the runs' training hours.
+
     ``mean_over=(first, last)`` adds a column of each seed's mean over epochs ``first`` to ``last``
     (counted from 1, both included; seeds that reached ``last``), steadier than one epoch's value
-    while success is still a few test episodes.
+    while success is still a few test episodes. ``improvement_at=n`` adds the probability that a
+    configuration's run beats a run of the panel's ``baseline`` configuration (the one whose label
+    starts with it) after ``n`` epochs, with its 95% interval.
 
     Examples:
         >>> import tempfile
         >>> with tempfile.TemporaryDirectory() as d:
-        ...     for seed, values in enumerate([(0.1, 0.5), (0.3, 0.7), (0.2,)]):
-        ...         run = Path(d) / "push-extended" / "her" / "paper" / f"seed{seed}"
-        ...         run.mkdir(parents=True)
-        ...         rows = [f"{e},{v},1800" for e, v in enumerate(values)]
-        ...         _ = (run / CSV_NAME).write_text("\\n".join(["epoch,test_success,epoch_s", *rows]) + "\\n")
-        ...     print(summary_table(d, [1, 2]))
-        | task | configuration | seeds | after 1 epoch | after 2 epochs | training hours |
-        |---|---|---|---|---|---|
-        | push-extended | her/paper | 3 | 0.20 [0.15, 0.25] | 0.60 [0.55, 0.65] (2 seeds) | 2.5 |
+        ...     for sampler, runs in (("her", [(0.1, 0.5), (0.3, 0.7), (0.2,)]), ("cebp", [(0.2, 0.9), (0.4, 0.8)])):
+        ...         for seed, values in enumerate(runs):
+        ...             run = Path(d) / "push-extended" / sampler / "paper" / f"seed{seed}"
+        ...             run.mkdir(parents=True)
+        ...             rows = [f"{e},{v},1800" for e, v in enumerate(values)]
+        ...             _ = (run / CSV_NAME).write_text("\\n".join(["epoch,test_success,epoch_s", *rows]) + "\\n")
+        ...     print(summary_table(d, [1, 2], improvement_at=2))
+        | task | configuration | seeds | after 1 epoch | after 2 epochs | P(> her) after 2 epochs | training hours |
+        |---|---|---|---|---|---|---|
+        | push-extended (paper) | cebp | 2 | 0.30 [0.20, 0.40] | 0.85 [0.80, 0.90] | 1.00 [1.00, 1.00] | 2.0 |
+        | push-extended (paper) | her | 3 | 0.20 [0.10, 0.30] | 0.60 [0.50, 0.70] (2 seeds) | (baseline) | 2.5 |
     """
     if any(n < 1 for n in after_epochs):
         raise ValueError(f"after_epochs={after_epochs}: epoch counts start at 1")
     if mean_over is not None and not 1 <= mean_over[0] <= mean_over[1]:
         raise ValueError(f"mean_over={tuple(mean_over)}: needs 1 <= first <= last")
+    if improvement_at is not None and improvement_at < 1:
+        raise ValueError(f"improvement_at={improvement_at}: epoch counts start at 1")
     root = Path(root)
     values = collect_sweep(root, metric)
     if not values:
@@ -198,18 +268,30 @@ def summary_table(
     header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs)]
     if mean_over is not None:
         header.append(f"mean over epochs {mean_over[0]}-{mean_over[1]}")
+    if improvement_at is not None:
+        header.append(f"P(> {baseline}) after {improvement_at} epoch{'s' * (improvement_at > 1)}")
     header.append("training hours")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+
+    def at_epoch(curves: list[np.ndarray], n: int) -> list[float]:
+        return [curve[n - 1] for curve in curves if len(curve) >= n]
+
     for panel, curves_by_label in sorted(values.items()):
         title, short = short_labels(panel, sorted(curves_by_label))
+        baselines = [curves for label, curves in curves_by_label.items() if short[label].startswith(baseline)]
         for label, curves in sorted(curves_by_label.items()):
             cells = [title, short[label], str(len(curves))]
             for n in after_epochs:
-                cells.append(median_cell([curve[n - 1] for curve in curves if len(curve) >= n], len(curves)))
+                cells.append(iqm_cell(at_epoch(curves, n), len(curves)))
             if mean_over is not None:
                 first, last = mean_over
                 window = [curve[first - 1 : last].mean() for curve in curves if len(curve) >= last]
-                cells.append(median_cell(window, len(curves)))
+                cells.append(iqm_cell(window, len(curves)))
+            if improvement_at is not None and len(baselines) == 1 and curves is baselines[0]:
+                cells.append("(baseline)")
+            elif improvement_at is not None:
+                reference = at_epoch(baselines[0], improvement_at) if len(baselines) == 1 else []
+                cells.append(improvement_cell(at_epoch(curves, improvement_at), reference))
             hours = sum(curve.sum() for curve in epoch_seconds[panel][label]) / 3600
             cells.append(f"{hours:.1f}")
             lines.append("| " + " | ".join(cells) + " |")
@@ -217,7 +299,9 @@ def summary_table(
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description="Median and interquartile success curves of a sweep.")
+    parser = argparse.ArgumentParser(
+        description="Success curves of a sweep (IQM over seeds, 95%% stratified-bootstrap band), and tables."
+    )
     parser.add_argument("root", help="sweep folder (e.g. runs/ or multirun/...)")
     parser.add_argument("--out", help="PNG path (default: <root>/<metric>.png)")
     parser.add_argument("--metric", default="test_success", help="CSV column to plot")
@@ -229,12 +313,18 @@ def main(argv: list[str] | None = None) -> None:
         "--mean-over", nargs=2, type=int, metavar=("FIRST", "LAST"),
         help="with --table: a column of each seed's mean over epochs FIRST to LAST",
     )
+    parser.add_argument(
+        "--improvement-at", type=int, metavar="N",
+        help="with --table: a column of the probability of improvement over --baseline after N epochs",
+    )
+    parser.add_argument("--baseline", default="her", help="the configuration --improvement-at compares with")
     args = parser.parse_args(argv)
-    if args.mean_over and not args.table:
-        parser.error("--mean-over adds a column to --table: give --table too")
+    for option, value in (("--mean-over", args.mean_over), ("--improvement-at", args.improvement_at)):
+        if value and not args.table:
+            parser.error(f"{option} adds a column to --table: give --table too")
     print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title)}")
     if args.table:
-        print(summary_table(args.root, args.table, args.metric, args.mean_over))
+        print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline))
 
 
 if __name__ == "__main__":
