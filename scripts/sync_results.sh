@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Copies every comparison run's progress.csv from runs/ to docs/results/comparison/ (same layout) and
+# commits them, so that finished epochs survive the session. Usage: bash scripts/sync_results.sh [--every SECONDS]
+set -uo pipefail
+cd "$(dirname "$0")/.."
+every=0
+[ "${1:-}" = "--every" ] && every=${2:?--every needs seconds}
+sync_once() {
+  local changed=0
+  while IFS= read -r csv; do
+    dest="docs/results/comparison/${csv#runs/}"
+    if ! cmp -s "$csv" "$dest"; then
+      mkdir -p "$(dirname "$dest")" && cp "$csv" "$dest" && changed=1
+    fi
+  done < <(find runs -path runs/quick -prune -o -name progress.csv -print 2>/dev/null | sort)
+  if [ "$changed" = 1 ]; then
+    git add docs/results/comparison
+    git commit -q -m "Comparison: epochs finished by $(date -u +%H:%MZ)" -- docs/results/comparison \
+      && echo "[sync] $(date -u +%TZ) committed"
+  fi
+}
+sync_once
+while [ "$every" -gt 0 ]; do sleep "$every"; sync_once; done
