@@ -1,8 +1,11 @@
 """Each sampler's episode frequencies and weights against the formulas, computed by hand."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
 from scipy.stats import chisquare, rankdata
+from tensordict import TensorDict
 from torchrl.data import TensorDictReplayBuffer
 
 from tests.replay.conftest import T, make_episodes
@@ -222,3 +225,14 @@ def test_a_draw_never_returns_unwritten_rows():
         rb = TensorDictReplayBuffer(storage=EpisodeStorage(1000 * T), sampler=sampler, dim_extend=0, batch_size=4096)
         rb.extend(hand_made(3))
         assert rb.sample()["index"][:, 0].max() <= 2
+
+
+def test_released_cebp_mask_from_the_named_layout_repeats_the_recorded_priorities():
+    # Six scripted pushes on the extended mocap Push, recorded with the priorities the released form
+    # gave before the observation layout was named (gripper slice hard-coded); one episode leaves the
+    # workspace box, so the mask decides part of it.
+    recorded = torch.load(Path(__file__).parent / "data" / "released_cebp_mocap_push.pt", weights_only=True)
+    episodes = TensorDict(recorded["episodes"], [6, T])
+    priority = ReleasedCEBPSampler("push").episode_priority(episodes)
+    torch.testing.assert_close(priority, recorded["priority"], rtol=1e-12, atol=0.0)
+    assert priority.min() < 1e-4 < priority.max()
