@@ -129,6 +129,16 @@ def test_released_robot_trains_and_names_its_run_folder(tmp_path, env):
     assert "runs/${env_label:${env}}/" in (REPO / "conf" / "config.yaml").read_text()
 
 
+def test_capacity_below_one_cycle_and_bad_cebp_parameters_are_named_before_any_env_starts(tmp_path):
+    with pytest.raises(ConfigError, match=r"replay.capacity=700: .* needs at least 800 transitions"):
+        train(config("preset=paper", "replay.capacity=700"), tmp_path / "capacity")  # 16 episodes of 50 steps
+    with pytest.raises(Exception, match=r"temperature=-1.0: must be a positive number"):
+        train(config("sampler=cebp", "sampler.temperature=-1.0"), tmp_path / "temperature")
+    with pytest.raises(Exception, match=r"scale=0.0: must be a positive number"):
+        train(config("sampler=cebp", "sampler.scale=0.0"), tmp_path / "scale")
+    assert not any(tmp_path.rglob("progress.csv"))
+
+
 def test_wrong_control_is_listed_with_what_is_allowed():
     with pytest.raises(ConfigError, match=r"env.control='cartesian': must be one of \['mocap', 'joint'\]"):
         validate_config(config("env.control=cartesian"))

@@ -10,6 +10,8 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from torchrl_cebp.envs import ALL_TASKS, CONTROLS, FRANKA_TASK, GOAL_SPACES, RobotOptions
+from torchrl_cebp.envs.franka import FrankaLayout
+from torchrl_cebp.envs.goal_spaces import get_goal_space
 from torchrl_cebp.replay.her import STRATEGIES
 from torchrl_cebp.training.metrics import LOGGERS
 
@@ -118,10 +120,29 @@ def validate_config(cfg: DictConfig) -> None:
     real_in("agent.lr_critic", 0.0, math.inf, open_low=True)
     check("agent.hidden", lambda v: v is not None and len(v) > 0 and all(_is_int(h) and h > 0 for h in v),
           "a non-empty list of positive integers")
+    steps = episode_steps(cfg)
+    if steps is not None and _is_int(OmegaConf.select(cfg, "replay.capacity")):
+        per_cycle = cfg.rollouts_per_cycle * cfg.workers * steps if _is_int(cfg.get("workers")) else None
+        if per_cycle is not None and cfg.replay.capacity < per_cycle:
+            errors.append(
+                f"  replay.capacity={cfg.replay.capacity}: smaller than one cycle's episodes; "
+                f"needs at least {per_cycle} transitions (rollouts_per_cycle x workers x {steps} steps)"
+            )
     if cfg.get("device") == "cuda" and not torch.cuda.is_available():
         errors.append("  device='cuda': CUDA is not available here; use device=auto or device=cpu")
     if errors:
         raise ConfigError("invalid config:\n" + "\n".join(errors))
+
+
+def episode_steps(cfg: DictConfig) -> int | None:
+    """Steps per episode of the configured task, without building it (``None`` if the env config is invalid)."""
+    task, goal_space = OmegaConf.select(cfg, "env.task"), OmegaConf.select(cfg, "env.goal_space")
+    if task == FRANKA_TASK:
+        return FrankaLayout().max_episode_steps
+    try:
+        return get_goal_space(task, goal_space).max_episode_steps
+    except ValueError:
+        return None
 
 
 def resolve_device(name: str) -> torch.device:

@@ -140,6 +140,9 @@ class CEBPSampler(_ContactEnergySampler):
     ) -> None:
         super().__init__(task, touch_key, position_key, next_position_key, next_observation_key, generator)
         default_scale, default_temperature = PAPER_PARAMETERS[task]
+        for name, value in (("scale", scale), ("temperature", temperature)):
+            if value is not None and not value > 0:
+                raise ValueError(f"CEBPSampler {name}={value!r}: must be a positive number (or None for the task's default)")
         self.scale = default_scale if scale is None else float(scale)
         self.temperature = default_temperature if temperature is None else float(temperature)
         self.beta = float(beta)
