@@ -5,8 +5,9 @@
     python train.py -m sampler=her,cebp seed=0,1      # sweep, two jobs at a time
     python train.py sampler=cebp env=pick_place resume=true   # continue after the last finished epoch
 
-Options: conf/config.yaml; groups env={pick_place,push,slide},
-sampler={her,per,ebp,mep,cper,cebp,cebp_released}, preset={default,quick,paper}.
+Options: conf/config.yaml; groups env={pick_place,push,slide,franka_pick_place,
+pick_place_released,push_released,slide_released}, sampler={her,per,ebp,mep,cper,cebp,cebp_released,
+cebp_initial}, preset={default,quick,paper}, +comparison=<stage> (conf/comparison/).
 """
 
 import hydra

@@ -110,9 +110,8 @@ def contact_under_random_actions(episodes: int, seed: int = 0, **robot) -> tuple
     """Fractions of random-action extended-Push episodes in which the object moved > 1 cm, and touch fired.
 
     Example:
-        >>> moved, touched = contact_under_random_actions(4, control="joint", touch_ignores_table=True)
-        >>> 0.0 <= moved <= 1.0 and 0.0 <= touched <= 1.0
-        True
+        >>> contact_under_random_actions(4)[1]  # the stock pads: fingertips in the table from the first step
+        1.0
     """
     torch.manual_seed(seed)
     env = make_env("push", "extended", seed=seed, num_envs=episodes, **robot)

@@ -75,8 +75,9 @@ def _our_methods() -> dict[str, Builder]:
     factories: dict[str, tuple[str, Callable[[int], dict]]] = {
         "ours_uniform": ("UniformEpisodeSampler", lambda capacity: {}),
         # The synthetic episodes are FetchPush-shaped, as is the released_cebp peer.
-        "ours_cebp_paper": ("CEBPSampler", lambda capacity: {"task": "push", "form": "paper"}),
-        "ours_cebp_released": ("CEBPSampler", lambda capacity: {"task": "push", "form": "released"}),
+        "ours_cebp_paper": ("CEBPSampler", lambda capacity: {"task": "push"}),
+        "ours_cebp_released": ("ReleasedCEBPSampler", lambda capacity: {"task": "push"}),
+        "ours_cebp_initial": ("InitialCEBPSampler", lambda capacity: {"task": "push"}),
         "ours_cper": ("CPERSampler", lambda capacity: {}),
         "ours_ebp": ("EBPSampler", lambda capacity: {}),
         "ours_mep": ("MEPSampler", lambda capacity: {}),

@@ -11,7 +11,8 @@ The statistics follow rliable's conventions (:mod:`torchrl_cebp.stats`): IQM, st
 
 A run is any folder holding a ``progress.csv``; runs are grouped by their parent folder (the
 seeds of one configuration), and one panel is drawn per top-level folder under the sweep root
-(``<task>-<goal_space>`` with the trainer's layout ``runs/<task>-<goal_space>/<sampler>/<preset>/seed<k>``).
+(``<task>-<goal_space>[-<robot>]`` with the trainer's layout
+``runs/<task>-<goal_space>[-<robot>]/<sampler>/<preset>/seed<k>``).
 """
 from __future__ import annotations
 
@@ -236,8 +237,8 @@ def summary_table(
     ``mean_over=(first, last)`` adds a column of each seed's mean over epochs ``first`` to ``last``
     (counted from 1, both included; seeds that reached ``last``), steadier than one epoch's value
     while success is still a few test episodes. ``improvement_at=n`` adds the probability that a
-    configuration's run beats a run of the panel's ``baseline`` configuration (the one whose label
-    starts with it) after ``n`` epochs, with its 95% interval.
+    configuration's run beats a run of the panel's ``baseline`` configuration (the sampler folder of
+    that name, e.g. ``her``; ``-`` in panels without it) after ``n`` epochs, with its 95% interval.
 
     Examples:
         >>> import tempfile
@@ -278,7 +279,7 @@ def summary_table(
 
     for panel, curves_by_label in sorted(values.items()):
         title, short = short_labels(panel, sorted(curves_by_label))
-        baselines = [curves for label, curves in curves_by_label.items() if short[label].startswith(baseline)]
+        baselines = [curves for label, curves in curves_by_label.items() if label.split("/")[0] == baseline]
         for label, curves in sorted(curves_by_label.items()):
             cells = [title, short[label], str(len(curves))]
             for n in after_epochs:

@@ -52,6 +52,19 @@ def iqm(scores, axis: int | None = None) -> np.ndarray | float:
     return float(out) if np.ndim(out) == 0 else out
 
 
+def _resamples(scores: np.ndarray, reps: int, rng: np.random.Generator) -> np.ndarray:
+    # [runs, tasks] -> [reps, runs, tasks]: runs drawn with replacement within each task (stratified).
+    runs, tasks = scores.shape
+    picks = rng.integers(0, runs, size=(reps, runs, tasks))
+    return np.take_along_axis(np.broadcast_to(scores, (reps, runs, tasks)), picks, axis=1)
+
+
+def _percentile_interval(values: np.ndarray, confidence: float) -> tuple[float, float]:
+    tail = 100 * (1 - confidence) / 2
+    low, high = np.percentile(values, [tail, 100 - tail])
+    return float(low), float(high)
+
+
 def stratified_bootstrap_ci(
     scores,
     statistic: Callable[[np.ndarray], np.ndarray] = lambda s: iqm(s.reshape(s.shape[0], -1), axis=1),
@@ -71,15 +84,8 @@ def stratified_bootstrap_ci(
         >>> 0.0 <= low < 0.5 < high <= 1.0
         True
     """
-    scores = _as_runs_by_tasks(scores)
-    runs, tasks = scores.shape
-    rng = np.random.default_rng(seed)
-    picks = rng.integers(0, runs, size=(reps, runs, tasks))
-    resampled = np.take_along_axis(np.broadcast_to(scores, (reps, runs, tasks)), picks, axis=1)
-    values = statistic(resampled)
-    tail = 100 * (1 - confidence) / 2
-    low, high = np.percentile(values, [tail, 100 - tail])
-    return float(low), float(high)
+    resampled = _resamples(_as_runs_by_tasks(scores), reps, np.random.default_rng(seed))
+    return _percentile_interval(statistic(resampled), confidence)
 
 
 def _mann_whitney(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -115,13 +121,4 @@ def probability_of_improvement_ci(
     """
     x, y = _as_runs_by_tasks(x), _as_runs_by_tasks(y)
     rng = np.random.default_rng(seed)
-
-    def resample(scores: np.ndarray) -> np.ndarray:
-        runs, tasks = scores.shape
-        picks = rng.integers(0, runs, size=(reps, runs, tasks))
-        return np.take_along_axis(np.broadcast_to(scores, (reps, runs, tasks)), picks, axis=1)
-
-    values = _mann_whitney(resample(x), resample(y))
-    tail = 100 * (1 - confidence) / 2
-    low, high = np.percentile(values, [tail, 100 - tail])
-    return float(low), float(high)
+    return _percentile_interval(_mann_whitney(_resamples(x, reps, rng), _resamples(y, reps, rng)), confidence)

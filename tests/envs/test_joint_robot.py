@@ -48,6 +48,31 @@ def test_joint_reset_perturbs_the_start_and_mocap_does_not():
     np.testing.assert_array_equal(starts[0], starts[1])
 
 
+def test_joint_reset_perturbation_stays_within_cpers_bounds():
+    env = make_touch_fetch("push", "extended", control="joint")
+    initial = np.array([j.initial for j in ARM_JOINTS])
+    low, high = np.array([j.perturbation for j in ARM_JOINTS]).T
+    offsets = []
+    for seed in range(200):
+        env.reset(seed=seed)
+        offsets.append(arm_angles(env) - initial)
+    offsets = np.array(offsets)
+    assert (offsets >= low - 1e-12).all() and (offsets <= high + 1e-12).all()
+    # every joint is perturbed, over most of its interval (shoulder lift and elbow only downwards)
+    assert ((offsets.max(0) - offsets.min(0)) > 0.8 * (high - low)).all()
+
+
+def test_joint_robot_with_table_blind_pads_feels_no_table():
+    # A zero action lowers the joint robot's closed fingers onto the table (a 2 cm sag below its reset height).
+    readings = {}
+    for blind in (False, True):
+        env = make_touch_fetch("push", "extended", control="joint", touch_ignores_table=blind)
+        env.reset(seed=0)
+        readings[blind] = sum(env.step(np.zeros(7))[4]["touch"].sum() for _ in range(20))
+    assert readings[False] > 10.0
+    assert readings[True] == 0.0
+
+
 def test_joint_object_and_goal_are_measured_from_the_reset_gripper():
     env = make_touch_fetch("push", "extended", control="joint")
     for seed in range(20):

@@ -243,3 +243,12 @@ def test_tensorboard_logger_gets_every_csv_column(tmp_path):
 def test_unknown_logger_is_refused_with_the_valid_ones():
     with pytest.raises(ConfigError, match="logger='tb'.*tensorboard"):
         validate_config(config("logger=tb"))
+
+
+def test_every_row_names_the_commit_it_ran_on(tmp_path):
+    log = rows(train(config("epochs=1"), tmp_path))
+    commit = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=REPO, capture_output=True, text=True)
+    if commit.returncode != 0:
+        pytest.skip("not a git checkout")
+    assert log[0]["code_commit"].removesuffix("+dirty") == commit.stdout.strip()
+    assert float(log[0]["load_avg"]) >= 0.0

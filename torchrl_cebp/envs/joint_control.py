@@ -20,6 +20,7 @@ ARM_KP = 300.0
 FINGER_KP = 30000.0
 FINGER_CTRL_RANGE = (0.0, 0.05)
 FINGER_ACTUATORS: tuple[str, str] = ("robot0:l_gripper_finger_joint", "robot0:r_gripper_finger_joint")
+MOCAP_BODY = "robot0:mocap"
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,18 @@ ARM_JOINTS: tuple[ArmJoint, ...] = (
 )
 
 
+def check_control(control: str) -> str:
+    """``control`` if it names a robot, else ValueError listing the valid ones.
+
+    Example:
+        >>> check_control("joint")
+        'joint'
+    """
+    if control not in CONTROLS:
+        raise ValueError(f"unknown control {control!r}; valid controls: {', '.join(CONTROLS)}")
+    return control
+
+
 def action_size(control: str, gripper_blocked: bool) -> int:
     """4 (mocap: dx, dy, dz, gripper); 7 arm targets under joint control, plus one gripper value unless blocked.
 
@@ -58,9 +71,7 @@ def action_size(control: str, gripper_blocked: bool) -> int:
         >>> action_size("joint", gripper_blocked=True), action_size("joint", gripper_blocked=False)
         (7, 8)
     """
-    if control not in CONTROLS:
-        raise ValueError(f"unknown control {control!r}; valid controls: {', '.join(CONTROLS)}")
-    if control == "mocap":
+    if check_control(control) == "mocap":
         return 4
     return len(ARM_JOINTS) + (0 if gripper_blocked else 1)
 
@@ -77,7 +88,7 @@ def add_joint_actuators(spec: mujoco.MjSpec) -> None:
         >>> model.nu, model.neq
         (9, 0)
     """
-    for weld in list(spec.equalities):
+    for weld in [eq for eq in spec.equalities if MOCAP_BODY in (eq.name1, eq.name2)]:
         spec.delete(weld)
     for finger in spec.actuators:
         if finger.name in FINGER_ACTUATORS:

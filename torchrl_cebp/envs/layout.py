@@ -61,8 +61,8 @@ class ObservationLayout:
         raise KeyError(f"no field {name!r} in this layout; fields: {[field for field, _ in self.fields]}")
 
     def __getattr__(self, name: str) -> slice:
-        if name.startswith("_") or name not in {field for field, _ in _FETCH_FIELDS + _TOUCH_FIELDS}:
-            raise AttributeError(name)
+        if name not in {field for field, _ in self.fields}:
+            raise AttributeError(f"{type(self).__name__} has no field {name!r}; fields: {[f for f, _ in self.fields]}")
         return self.slice(name)
 
     def gripper_opening(self, observation):
@@ -86,4 +86,3 @@ class ObservationLayout:
 
 
 FETCH_OBSERVATION = ObservationLayout()
-FETCH_OBSERVATION_WITH_TOUCH = ObservationLayout(with_touch=True)

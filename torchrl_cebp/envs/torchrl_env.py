@@ -14,7 +14,7 @@ from torchrl.envs import EnvBase
 
 from torchrl_cebp.envs.franka import FRANKA_TASK, make_franka
 from torchrl_cebp.envs.goal_spaces import TASKS
-from torchrl_cebp.envs.joint_control import CONTROLS
+from torchrl_cebp.envs.joint_control import check_control
 from torchrl_cebp.envs.touch_fetch import make_touch_fetch
 
 ALL_TASKS: tuple[str, ...] = (*TASKS, FRANKA_TASK)
@@ -40,8 +40,7 @@ class RobotOptions:
     touch_in_observation: bool = False
 
     def __post_init__(self) -> None:
-        if self.control not in CONTROLS:
-            raise ValueError(f"Unknown control {self.control!r}; valid controls: {', '.join(CONTROLS)}")
+        check_control(self.control)
 
     @property
     def label(self) -> str:

@@ -30,7 +30,7 @@ from gymnasium_robotics.envs.fetch.slide import MujocoFetchSlideEnv
 from gymnasium import spaces
 
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, GoalSpace, get_goal_space
-from torchrl_cebp.envs.joint_control import CONTROLS, JointController, add_joint_actuators
+from torchrl_cebp.envs.joint_control import CONTROLS, JointController, add_joint_actuators, check_control
 from torchrl_cebp.envs.layout import ObservationLayout
 from torchrl_cebp.envs.touch import TouchReporting, add_table_blind_touch_pad, add_touch_pad
 
@@ -60,8 +60,7 @@ def touch_spec(
         >>> touch_spec(path, control="joint", touch_ignores_table=True).compile().nu
         7
     """
-    if control not in CONTROLS:
-        raise ValueError(f"unknown control {control!r}; valid controls: {', '.join(CONTROLS)}")
+    check_control(control)
     spec = mujoco.MjSpec.from_file(model_path)
     add_pad = add_table_blind_touch_pad if touch_ignores_table else add_touch_pad
     for side, body_name, inward in _FINGERS:
@@ -89,10 +88,8 @@ class _TouchFetchMixin(TouchReporting):
         touch_in_observation: bool = False,
         **kwargs: Any,
     ) -> None:
-        if control not in CONTROLS:
-            raise ValueError(f"unknown control {control!r}; valid controls: {', '.join(CONTROLS)}")
         self.goal_space = goal_space
-        self.control = control
+        self.control = check_control(control)
         self.touch_ignores_table = touch_ignores_table
         self.layout = ObservationLayout(with_touch=touch_in_observation)
         self.space: GoalSpace = get_goal_space(self.task, goal_space)
@@ -273,8 +270,7 @@ def gym_id(task: str, goal_space: str = "standard", control: str = "mocap") -> s
         ('TouchFetchPickAndPlaceExtended-v0', 'TouchFetchPushJointExtended-v0')
     """
     get_goal_space(task, goal_space)
-    if control not in CONTROLS:
-        raise ValueError(f"unknown control {control!r}; valid controls: {', '.join(CONTROLS)}")
+    check_control(control)
     name = TOUCH_FETCH_CLASSES[task].__name__.removesuffix("Env")
     return f"{name}{'Joint' if control == 'joint' else ''}{'Extended' if goal_space == 'extended' else ''}-v0"
 

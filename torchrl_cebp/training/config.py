@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import asdict
 from numbers import Real
 
 import torch
@@ -95,8 +96,11 @@ def validate_config(cfg: DictConfig) -> None:
     one_of("env.control", CONTROLS)
     for key in ("env.touch_ignores_table", "env.touch_in_observation"):
         check(key, lambda v: isinstance(v, bool), "true or false")
-    if OmegaConf.select(cfg, "env.task") == FRANKA_TASK and OmegaConf.select(cfg, "env.control") == "joint":
-        errors.append("  env.control='joint': the Franka task has the mocap robot only; use env.control=mocap")
+    if OmegaConf.select(cfg, "env.task") == FRANKA_TASK:
+        for key, default in asdict(RobotOptions()).items():
+            if OmegaConf.select(cfg, f"env.{key}", default=default) != default:
+                errors.append(f"  env.{key}={OmegaConf.select(cfg, f'env.{key}')!r}: the Franka task has the mocap robot "
+                              f"with its own pads only; use env.{key}={default!r}")
     one_of("env_backend", ENV_BACKENDS)
     one_of("precision", PRECISIONS)
     one_of("logger", LOGGERS)

@@ -64,8 +64,10 @@ class EpochCsv:
         ...     log = EpochCsv(pathlib.Path(d) / "progress.csv")
         ...     log.write({"epoch": 0, "test_success": 0.5})
         ...     log.write({"epoch": 1, "test_success": 0.75})
-        ...     EpochCsv(log.path, start_epoch=1).path.read_text().splitlines()
-        ['epoch,test_success', '0,0.5']
+        ...     resumed = EpochCsv(log.path, start_epoch=1)
+        ...     resumed.write({"epoch": 1, "test_success": 0.75, "load_avg": 2.0})
+        ...     resumed.path.read_text().splitlines()
+        ['epoch,test_success,load_avg', '0,0.5,', '1,0.75,2.0']
     """
 
     def __init__(self, path: str | Path, start_epoch: int = 0) -> None:
@@ -90,5 +92,11 @@ class EpochCsv:
         if self._fields is None:
             self._fields = list(row)
             self._rewrite([])
+        elif set(row) - set(self._fields):
+            # A run resumed by newer code that logs more columns: earlier rows get them empty.
+            with self.path.open(newline="") as f:
+                kept = list(csv.DictReader(f))
+            self._fields += [key for key in row if key not in self._fields]
+            self._rewrite(kept)
         with self.path.open("a", newline="") as f:
             csv.DictWriter(f, fieldnames=self._fields).writerow(row)

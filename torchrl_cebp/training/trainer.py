@@ -66,7 +66,7 @@ class RelabelledTransitions:
     (independently of how the sampler draws from the buffer).
 
     Example:
-        >>> from torchrl_cebp.envs import RobotOptions, make_env
+        >>> from torchrl_cebp.envs import make_env
         >>> env = make_env("push", num_envs=2)
         >>> feed = RelabelledTransitions(HindsightRelabel(env.compute_reward), n_episodes=2, episode_steps=50)
         >>> feed(env.rollout(50))["desired_goal"].shape
