@@ -67,22 +67,28 @@ def test_joint_robot_with_table_blind_pads_feels_no_table():
     readings = {}
     for blind in (False, True):
         env = make_touch_fetch("push", "extended", control="joint", touch_ignores_table=blind)
-        env.reset(seed=0)
+        start = env.reset(seed=2)[0]["achieved_goal"]
         readings[blind] = sum(env.step(np.zeros(7))[4]["touch"].sum() for _ in range(20))
+        np.testing.assert_allclose(env._get_obs()["achieved_goal"], start, atol=1e-3)  # the object was not touched
     assert readings[False] > 10.0
     assert readings[True] == 0.0
 
 
-def test_joint_object_and_goal_are_measured_from_the_reset_gripper():
+def test_joint_object_and_goal_are_drawn_around_the_unperturbed_initial_grip():
+    # As CPER's released code: the anchor is the grip of the initial joints, the same every episode,
+    # while the arm itself starts perturbed.
     env = make_touch_fetch("push", "extended", control="joint")
+    anchor = env.initial_gripper_xpos.copy()
+    grips = []
     for seed in range(20):
         obs, _ = env.reset(seed=seed)
-        grip = obs["observation"][FETCH_OBSERVATION.gripper_position]
+        np.testing.assert_array_equal(env.initial_gripper_xpos, anchor)
+        grips.append(obs["observation"][FETCH_OBSERVATION.gripper_position])
         obj = obs["observation"][FETCH_OBSERVATION.object_position]
-        np.testing.assert_allclose(grip, env.initial_gripper_xpos, atol=1e-9)
-        assert 0.1 <= np.linalg.norm(obj[:2] - grip[:2]) <= 0.25 * np.sqrt(2)
-        offset = obs["desired_goal"][:2] - grip[:2] - [0.1, 0.0]
+        assert 0.1 <= np.linalg.norm(obj[:2] - anchor[:2]) and np.abs(obj[:2] - anchor[:2]).max() <= 0.25
+        offset = obs["desired_goal"][:2] - anchor[:2] - [0.1, 0.0]
         assert np.abs(offset).max() <= 0.25
+    assert np.ptp(np.array(grips), axis=0).max() > 0.02  # the perturbed starts differ from the anchor
 
 
 def test_table_blind_pads_read_zero_on_the_table_and_positive_on_the_object():

@@ -135,14 +135,17 @@ class _TouchFetchMixin(TouchReporting):
     def _env_setup(self, initial_qpos: dict) -> None:
         if self.joint_controller is None:
             return super()._env_setup(initial_qpos)
-        # CPER's initial joints instead of a mocap move; the steps let the object settle on the table.
+        # CPER's initial joints instead of a mocap move. As in CPER, object starts and goals are drawn
+        # around the grip of the unperturbed initial pose, fixed for every episode.
         for name, value in initial_qpos.items():
             self._utils.set_joint_qpos(self.model, self.data, name, value)
         self.joint_controller.set_initial_arm(self.data, rng=None)
         self._mujoco.mj_forward(self.model, self.data)
+        self.initial_gripper_xpos = self._utils.get_site_xpos(self.model, self.data, "robot0:grip").copy()
+        # gymnasium-robotics' initial object pose is 2.5 cm deep in the table (CPER's is 0.5 cm):
+        # let it settle, so that the goals on the table are where a resting object's centre can be.
         for _ in range(10):
             self._mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
-        self.initial_gripper_xpos = self._utils.get_site_xpos(self.model, self.data, "robot0:grip").copy()
         self.height_offset = self._utils.get_site_xpos(self.model, self.data, "object0")[2]
 
     def _set_action(self, action: np.ndarray) -> None:
@@ -167,9 +170,6 @@ class _TouchFetchMixin(TouchReporting):
         self.data.qvel[:] = np.copy(self.initial_qvel)
         if self.joint_controller is not None:
             self.joint_controller.set_initial_arm(self.data, self.np_random)
-            self._mujoco.mj_forward(self.model, self.data)
-            # Object start and goal are measured from where this reset put the gripper.
-            self.initial_gripper_xpos = self._utils.get_site_xpos(self.model, self.data, "robot0:grip").copy()
         object_qpos = self._utils.get_joint_qpos(self.model, self.data, "object0:joint")
         object_qpos[:2] = self._sample_object_xy()
         self._utils.set_joint_qpos(self.model, self.data, "object0:joint", object_qpos)
