@@ -15,7 +15,7 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
-from torchrl._torchrl import SumSegmentTreeFp64
+from torchrl.data.replay_buffers.samplers import SumSegmentTreeFp64
 from torchrl.data.replay_buffers.samplers import Sampler
 from torchrl.data.replay_buffers.storages import Storage
 
