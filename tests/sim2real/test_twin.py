@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -130,15 +131,34 @@ def test_camera_lost_stops_robot_and_ends_episode(loop, twin):
         backend.move(np.zeros(3), 1.0)
 
 
-def test_cli_rejects_bad_values():
-    with pytest.raises(ValueError, match="backend must be one of"):
-        parse_args(["run", "backend=ur5", "policy=scripted"])
-    with pytest.raises(ValueError, match="Bad value for episodes"):
-        parse_args(["run", "episodes=many", "policy=scripted"])
-    with pytest.raises(ValueError, match="checkpoint=PATH"):
-        parse_args(["run"])
-    with pytest.raises(ValueError, match="needs out="):
-        parse_args(["calibrate"])
+def test_cli_rejects_bad_values_naming_them(capsys):
+    for argv, message in (
+        (["run", "backend=ur5", "policy=scripted"], "invalid choice: 'ur5'"),
+        (["run", "episodes=many", "policy=scripted"], "invalid int value: 'many'"),
+        (["run"], "checkpoint=PATH"),
+        (["calibrate"], "the following arguments are required: --out"),
+        (["fly"], "invalid choice: 'fly'"),
+    ):
+        with pytest.raises(SystemExit) as exit_:
+            parse_args(argv)
+        assert exit_.value.code == 2
+        assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["debug", "-h"], ["calibrate", "--help"],
+                                  ["perceive", "--help"]])
+def test_help_prints_usage_and_exits_0(argv, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 0
+    assert "usage: python -m torchrl_cebp.sim2real" in capsys.readouterr().out
+
+
+def test_run_and_debug_share_the_loop_options():
+    _, run = parse_args(["run", "policy=scripted", "camera_position=0.5,0,1.2", "--seed", "3"])
+    _, debug = parse_args(["debug", "out=frames", "camera_position=0.5,0,1.2", "--seed", "3"])
+    assert run["camera_position"] == debug["camera_position"] == (0.5, 0.0, 1.2)
+    assert run["seed"] == debug["seed"] == 3 and debug["policy"] == "scripted"
 
 
 def test_load_policy_reads_the_trainer_checkpoint(tmp_path):
@@ -159,6 +179,21 @@ def test_load_policy_reads_the_trainer_checkpoint(tmp_path):
     with loss.actor_network_params.to_module(loss.actor_network):
         expected = loss.actor_network(normalizer(obs.clone()))["action"]
     torch.testing.assert_close(policy(obs)["action"], expected)
+
+
+def test_debug_annotates_the_frames_the_policy_acted_on(tmp_path, monkeypatch):
+    from torchrl_cebp.sim2real.twin import TwinCamera
+
+    read = TwinCamera.read
+    frames = []
+    monkeypatch.setattr(TwinCamera, "read", lambda self: frames.append(read(self)) or frames[-1])
+    assert main(["debug", f"out={tmp_path}", "steps=3"]) == 0
+    assert len(frames) == 4  # the reset's frame and one per step: no second read for the annotation
+    for i in range(3):
+        raw = cv2.imread(str(tmp_path / "raw" / f"frame_{i:04d}.png"))
+        np.testing.assert_array_equal(raw, frames[i])
+        annotated = cv2.imread(str(tmp_path / f"frame_{i:04d}.png"))
+        assert 0.5 < (annotated == raw).all(-1).mean() < 1.0  # the same frame, with the annotation drawn on it
 
 
 def test_camera_only_mode_annotates_recorded_frames(tmp_path, capsys):

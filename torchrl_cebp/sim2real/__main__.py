@@ -13,8 +13,9 @@ OpenCV device (default 0).
 
 from __future__ import annotations
 
+import argparse
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -36,61 +37,85 @@ _BACKENDS = ("sim", "franky")
 
 
 def _floats(text: str) -> tuple[float, ...]:
-    return tuple(float(v) for v in text.split(","))
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
 
 
-# Per command: key -> (converter, default). None as default means required.
-_COMMANDS: dict[str, dict[str, tuple[Callable[[str], Any], Any]]] = {
-    "run": {
-        "backend": (str, "sim"), "policy": (str, "checkpoint"), "checkpoint": (str, ""), "episodes": (int, 5),
-        "seed": (int, 0), "calibration": (str, ""), "host": (str, ""), "camera": (int, 0),
-        "camera_position": (_floats, ()), "goal": (_floats, ()),
-    },
-    "calibrate": {"backend": (str, "sim"), "out": (str, None), "host": (str, ""), "ids": (str, "0,1,2,3")},
-    "debug": {
-        "backend": (str, "sim"), "out": (str, None), "steps": (int, 40), "policy": (str, "scripted"),
-        "checkpoint": (str, ""), "seed": (int, 0), "calibration": (str, ""), "host": (str, ""), "camera": (int, 0),
-        "camera_position": (_floats, ()), "goal": (_floats, ()),
-    },
-    # Camera only: recorded frames through the perception, no robot (calibration defaults to the twin's).
-    "perceive": {"frames": (str, None), "out": (str, None), "calibration": (str, "")},
+# One table of options; each command takes the ones it names. (flags, argparse keyword arguments)
+_OPTIONS: dict[str, dict[str, Any]] = {
+    "backend": {"choices": _BACKENDS, "default": "sim", "help": "sim: the MuJoCo twin; franky: a real Franka"},
+    "policy": {"choices": ("checkpoint", "scripted"), "default": "checkpoint", "help": "what acts"},
+    "checkpoint": {"default": "", "help": "a training run directory, its checkpoint.pt, or a policy file"},
+    "episodes": {"type": int, "default": 5, "help": "episodes to run"},
+    "seed": {"type": int, "default": 0, "help": "the twin's (and goals') seed"},
+    "calibration": {"default": "", "help": "the table calibration file (calibrate writes it; the twin's by default)"},
+    "host": {"default": "", "help": "the robot's address (backend=franky)"},
+    "camera": {"type": int, "default": 0, "help": "the OpenCV camera device (backend=franky)"},
+    "camera_position": {"type": _floats, "default": (), "help": "x,y,z of the camera (parallax of the cube's top face)"},
+    "goal": {"type": _floats, "default": (), "help": "x,y,z of a fixed goal (default: drawn per episode)"},
+    "out": {"required": True, "help": "where to write"},
+    "steps": {"type": int, "default": 40, "help": "steps of the debug episode"},
+    "ids": {"default": "0,1,2,3", "help": "the marker ids to jog to, comma-separated"},
+    "frames": {"required": True, "help": "a folder of recorded frames"},
+}
+_LOOP = ("backend", "policy", "checkpoint", "seed", "calibration", "host", "camera", "camera_position", "goal")
+_COMMANDS: dict[str, tuple[str, tuple[str, ...], dict[str, Any]]] = {
+    "run": ("run a policy through camera, perception and robot", (*_LOOP, "episodes"), {}),
+    "debug": ("one episode, every frame annotated with what the perception saw", (*_LOOP, "out", "steps"),
+              {"policy": "scripted"}),
+    "calibrate": ("write the table calibration (marker positions in the robot frame)", ("backend", "out", "host", "ids"),
+                  {}),
+    "perceive": ("camera only: recorded frames through the perception", ("frames", "out", "calibration"), {}),
 }
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """The command line: one subcommand per entry of ``_COMMANDS``, options from one table.
+
+    Example:
+        >>> build_parser().parse_args(["run", "--policy", "scripted"]).episodes
+        5
+    """
+    parser = argparse.ArgumentParser(
+        prog="python -m torchrl_cebp.sim2real",
+        description=__doc__.split("\n\n")[0],
+        epilog="Options are written key=value (as in the examples) or --key value.\n\n" + __doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (summary, options, defaults) in _COMMANDS.items():
+        command = commands.add_parser(name, help=summary, description=summary)
+        for option in options:
+            command.add_argument(f"--{option.replace('_', '-')}", dest=option, **_OPTIONS[option])
+        command.set_defaults(**defaults)
+    return parser
+
+
+def _as_flag(item: str) -> str:
+    key, sep, value = item.partition("=")
+    return f"--{key.replace('_', '-')}={value}" if sep and not item.startswith("-") else item
+
+
 def parse_args(argv: Sequence[str]) -> tuple[str, dict[str, Any]]:
-    """``COMMAND key=value ...`` -> (command, options with defaults filled); ``ValueError`` naming what is wrong.
+    """``COMMAND key=value ...`` (or ``--key value``) -> (command, options); exits with usage on a bad one.
 
     Example:
         >>> parse_args(["run", "policy=scripted", "episodes=2"])[1]["episodes"]
         2
+        >>> parse_args(["run", "checkpoint=runs/franka_pick_place-standard/seed0"])[1]["checkpoint"]
+        'runs/franka_pick_place-standard/seed0'
     """
-    if not argv or argv[0] not in _COMMANDS:
-        raise ValueError(f"Expected a command ({', '.join(_COMMANDS)}), got {argv[0] if argv else 'nothing'!r}.")
-    command, schema = argv[0], _COMMANDS[argv[0]]
-    options: dict[str, Any] = {}
-    for item in argv[1:]:
-        key, sep, text = item.partition("=")
-        if not sep:
-            raise ValueError(f"Arguments are key=value, got {item!r}.")
-        if key not in schema:
-            raise ValueError(f"Unknown option {key!r} for {command}; valid: {', '.join(schema)}.")
-        try:
-            options[key] = schema[key][0](text)
-        except ValueError:
-            raise ValueError(f"Bad value for {key}: {text!r}.") from None
-    for key, (_, default) in schema.items():
-        if key not in options:
-            if default is None:
-                raise ValueError(f"{command} needs {key}=...")
-            options[key] = default
-    if options.get("backend", "sim") not in _BACKENDS:
-        raise ValueError(f"backend must be one of {', '.join(_BACKENDS)}, got {options['backend']!r}.")
-    if options.get("policy", "scripted") not in ("scripted", "checkpoint"):
-        raise ValueError(f"policy must be 'scripted' or 'checkpoint', got {options['policy']!r}.")
+    parser = build_parser()
+    # key=value is the documented form; argparse reads it as --key=value.
+    args = parser.parse_args([_as_flag(item) for item in argv])
+    options = vars(args)
+    command = options.pop("command")
     if options.get("policy") == "checkpoint" and not options["checkpoint"]:
-        raise ValueError("Give checkpoint=PATH (a training run directory or checkpoint.pt), or policy=scripted.")
+        parser.error("give checkpoint=PATH (a training run directory or checkpoint.pt), or policy=scripted")
     if options.get("backend") == "franky" and not options["host"]:
-        raise ValueError("backend=franky needs host=ROBOT_IP.")
+        parser.error("backend=franky needs host=ROBOT_IP")
     return command, options
 
 
@@ -180,7 +205,7 @@ def debug(options: dict[str, Any]) -> list[Path]:
     written = []
     td = env.reset()
     for step in range(options["steps"]):
-        frame = camera.read()
+        frame = env.last_frame  # the frame behind the observation the policy acts on, not a second read
         path = out / f"frame_{step:04d}.png"
         cv2.imwrite(str(out / "raw" / path.name), frame)
         cv2.imwrite(str(path), draw_perception(frame, locator.locate(frame)))
@@ -223,12 +248,8 @@ def perceive(options: dict[str, Any]) -> list[Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m torchrl_cebp.sim2real``."""
-    try:
-        command, options = parse_args(sys.argv[1:] if argv is None else argv)
-    except ValueError as error:
-        print(f"error: {error}\n\n{__doc__}", file=sys.stderr)
-        return 2
+    """Entry point of ``python -m torchrl_cebp.sim2real`` (``--help`` on it and on every command)."""
+    command, options = parse_args(sys.argv[1:] if argv is None else argv)
     torch.set_num_threads(1)
     try:
         {"run": run, "calibrate": calibrate, "debug": debug, "perceive": perceive}[command](options)

@@ -187,6 +187,7 @@ class RealLoopEnv(EnvBase):
 
     def _perceive(self, state: RobotState) -> tuple[np.ndarray, PerceptionStatus]:
         frame = self.camera.read()
+        self.last_frame = frame  # what the latest observation was perceived from (debug annotates it)
         td = self.perception(TensorDict(pixels=torch.from_numpy(frame)))
         status = PerceptionStatus(int(td["perception_status"]))
         cube = td["cube_position"].numpy().astype(np.float64)
