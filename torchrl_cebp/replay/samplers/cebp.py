@@ -174,26 +174,21 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
     Args:
         task: selects ``k`` (0.1; 0.05 for slide) and the workspace box (none for the Franka task).
         k: the sigmoid's slope (default per task).
-        touch_key, position_key, next_position_key, next_observation_key: where
-            touch ``[T, 2]``, the object position before each step and after it
-            ``[T, 3]``, and the next observation (gripper position at
-            ``FETCH_OBSERVATION.gripper_position``) live.
+        touch_key, position_key, next_position_key, next_observation_key: as :class:`CEBPSampler`.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
-        >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
         >>> from torchrl_cebp.samplers import ReleasedCEBPSampler
         >>> T = 50
+        >>> grip = torch.tensor([1.2, 0.6, 0.5] + [0.0] * 22)  # inside Push's workspace box
         >>> episodes = TensorDict({
-        ...     "achieved_goal": torch.zeros(4, T, 3),
-        ...     "next": {"achieved_goal": torch.rand(4, T, 3), "touch": torch.rand(4, T, 2),
-        ...              "observation": torch.rand(4, T, 25) + torch.tensor([1.2, 0.6, 0.4] + [0.0] * 22)}}, [4, T])
-        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * T, ndim=2),
-        ...                             sampler=ReleasedCEBPSampler("push"), batch_size=8, dim_extend=0)
-        >>> _ = rb.extend(episodes)
-        >>> rb.sample()["priority_weight"].tolist()  # no IS correction below 256 episodes
-        [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0]
+        ...     "achieved_goal": torch.zeros(2, T, 3),
+        ...     "next": {"achieved_goal": torch.rand(2, T, 3), "touch": torch.rand(2, T, 2),
+        ...              "observation": torch.stack([grip.expand(T, 25), -grip.expand(T, 25)])}}, [2, T])
+        >>> priority = ReleasedCEBPSampler("push").episode_priority(episodes)
+        >>> bool(priority[0] > 1.0), bool(priority[1] < 1e-6)  # the second gripper never entered the box
+        (True, True)
     """
 
     def __init__(
@@ -236,10 +231,7 @@ class InitialCEBPSampler(_ContactEnergySampler):
     Args:
         task: selects the workspace box (none for the Franka task).
         beta: IS exponent (the commit's 0.7).
-        touch_key, position_key, next_position_key, next_observation_key: where
-            touch ``[T, 2]``, the object position before each step and after it
-            ``[T, 3]``, and the next observation (gripper position at
-            ``FETCH_OBSERVATION.gripper_position``) live.
+        touch_key, position_key, next_position_key, next_observation_key: as :class:`CEBPSampler`.
 
     Examples:
         >>> import torch
