@@ -142,8 +142,10 @@ def test_capacity_below_one_cycle_and_bad_cebp_parameters_are_named_before_any_e
 def test_wrong_control_is_listed_with_what_is_allowed():
     with pytest.raises(ConfigError, match=r"env.control='cartesian': must be one of \['mocap', 'joint'\]"):
         validate_config(config("env.control=cartesian"))
-    with pytest.raises(ConfigError, match="the Franka task has the mocap robot only"):
+    with pytest.raises(ConfigError, match="env.control='joint': the Franka task has the mocap robot"):
         validate_config(config("env=franka_pick_place", "env.control=joint"))
+    with pytest.raises(ConfigError, match="env.touch_ignores_table=True: the Franka task has the mocap robot"):
+        validate_config(config("env=franka_pick_place", "env.touch_ignores_table=true"))
 
 
 @pytest.mark.parametrize("sampler", SAMPLERS)
