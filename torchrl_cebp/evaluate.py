@@ -8,7 +8,6 @@ GIF (by extension) rendered offscreen (``MUJOCO_GL=osmesa`` on a CPU-only machin
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 from pathlib import Path
 
@@ -22,11 +21,10 @@ VIDEO_SUFFIXES = (".mp4", ".gif")
 
 def _checkpoint_env(checkpoint: Path, **kwargs):
     """The env the checkpoint's run trained on (task, goal space, robot); ``kwargs`` go to ``make_env``."""
-    from torchrl_cebp.envs import RobotOptions, make_env
+    from torchrl_cebp.envs import make_env_from_config
 
     path = checkpoint / CHECKPOINT_NAME if checkpoint.is_dir() else checkpoint
-    env = torch.load(path, map_location="cpu", weights_only=True)["config"]["env"]
-    return make_env(env["task"], env["goal_space"], **dataclasses.asdict(RobotOptions.from_config(env)), **kwargs)
+    return make_env_from_config(torch.load(path, map_location="cpu", weights_only=True)["config"]["env"], **kwargs)
 
 
 @torch.no_grad()

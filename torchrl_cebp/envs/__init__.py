@@ -11,7 +11,7 @@ from torchrl_cebp.envs.franka import register as register_franka
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, TASKS
 from torchrl_cebp.envs.joint_control import CONTROLS
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION, ObservationLayout
-from torchrl_cebp.envs.torchrl_env import ALL_TASKS, RobotOptions, TouchFetchEnv, make_env, make_goal_env
+from torchrl_cebp.envs.torchrl_env import ALL_TASKS, RobotOptions, TouchFetchEnv, make_env, make_env_from_config, make_goal_env
 from torchrl_cebp.envs.touch_fetch import gym_id, make_touch_fetch, register
 
 register()
@@ -30,6 +30,7 @@ __all__ = [
     "TouchFetchEnv",
     "gym_id",
     "make_env",
+    "make_env_from_config",
     "make_franka",
     "make_goal_env",
     "make_touch_fetch",

@@ -258,3 +258,13 @@ def make_env(
     if seed is not None:
         env.set_seed(seed)
     return env
+
+
+def make_env_from_config(env: Mapping, **kwargs) -> EnvBase:
+    """The env an env config names (``conf/env/*.yaml``, or a checkpoint's saved one); ``kwargs`` go to :func:`make_env`.
+
+    Example:
+        >>> make_env_from_config({"task": "push", "goal_space": "extended", "control": "joint"}).action_spec.shape
+        torch.Size([7])
+    """
+    return make_env(env["task"], env["goal_space"], **asdict(RobotOptions.from_config(env)), **kwargs)

@@ -9,7 +9,6 @@ process collects the next cycle's episodes while this one's updates run.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import os
@@ -31,7 +30,7 @@ from torchrl.objectives import SoftUpdate
 from tqdm import tqdm
 
 from torchrl_cebp.agents import HERDDPGLoss, make_critic
-from torchrl_cebp.envs import RobotOptions, make_env
+from torchrl_cebp.envs import make_env_from_config
 from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
 from torchrl_cebp.training.checkpoint import (
     has_checkpoint,
@@ -100,8 +99,7 @@ def evaluate_success_rate(env: EnvBase, policy: TensorDictSequential, n_episodes
 
 def make_task_env(cfg: DictConfig, **kwargs) -> EnvBase:
     """The configured task's env: ``cfg.env``'s task, goal space and robot; ``kwargs`` go to :func:`make_env`."""
-    robot = RobotOptions.from_config(cfg.env)
-    return make_env(cfg.env.task, cfg.env.goal_space, **dataclasses.asdict(robot), **kwargs)
+    return make_env_from_config(cfg.env, **kwargs)
 
 
 def make_batched_env(cfg: DictConfig, n_envs: int, device: torch.device | str = "cpu") -> EnvBase:
