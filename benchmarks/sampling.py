@@ -16,8 +16,10 @@ import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
+from omegaconf import OmegaConf
 
 from _peers import BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, episodes_to_tensordict, make_episodes
 
@@ -63,7 +65,7 @@ def _our_methods() -> dict[str, Builder]:
     """Our samplers behind ``make_replay_buffer``; empty (with a note) while the package lacks them."""
     try:
         from torchrl_cebp import samplers
-        from torchrl_cebp.replay import make_replay_buffer
+        from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
     except ImportError as err:
         print(f"note: our samplers are skipped, torchrl_cebp is not importable ({err})")
         return {}
@@ -71,13 +73,16 @@ def _our_methods() -> dict[str, Builder]:
     def reward_fn(ag: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
         return -(torch.linalg.vector_norm(ag - g, dim=-1, keepdim=True) > 0.05).float()
 
+    push = OmegaConf.load(Path(__file__).parents[1] / "conf" / "env" / "push.yaml")
+    push_workspace = tuple(map(tuple, push.gripper_workspace))
+
     # name -> (class, its kwargs given the capacity in transitions); PER's trees are sized by it.
     factories: dict[str, tuple[str, Callable[[int], dict]]] = {
         "ours_uniform": ("UniformEpisodeSampler", lambda capacity: {}),
         # The synthetic episodes are FetchPush-shaped, as is the released_cebp peer.
-        "ours_cebp_paper": ("CEBPSampler", lambda capacity: {"task": "push"}),
-        "ours_cebp_released": ("ReleasedCEBPSampler", lambda capacity: {"task": "push"}),
-        "ours_cebp_initial": ("InitialCEBPSampler", lambda capacity: {"task": "push"}),
+        "ours_cebp_paper": ("CEBPSampler", lambda capacity: {"temperature": push.cebp_temperature}),
+        "ours_cebp_released": ("ReleasedCEBPSampler", lambda capacity: {"k": push.cebp_released_k, "workspace": push_workspace}),
+        "ours_cebp_initial": ("InitialCEBPSampler", lambda capacity: {"workspace": push_workspace}),
         "ours_cper": ("CPERSampler", lambda capacity: {}),
         "ours_ebp": ("EBPSampler", lambda capacity: {}),
         "ours_mep": ("MEPSampler", lambda capacity: {}),
@@ -89,11 +94,9 @@ def _our_methods() -> dict[str, Builder]:
             capacity = len(stored) * EPISODE_LENGTH
             rb = make_replay_buffer(
                 getattr(samplers, cls_name)(**kwargs(capacity)),
-                reward_fn=reward_fn,
+                HindsightRelabel(reward_fn, future_p=FUTURE_P, strategy="future"),
                 capacity=capacity,
                 batch_size=BATCH_SIZE,
-                future_p=FUTURE_P,
-                strategy="future",
             )
             rb.extend(episodes_to_tensordict(stored))
             fresh = itertools.cycle([episodes_to_tensordict(pool.slice(i, i + 1)) for i in range(len(pool))])

@@ -1,8 +1,13 @@
+from pathlib import Path
+
 import pytest
 import torch
+from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 T = 50
+# The released code's gripper box for Push, as the env config states it.
+PUSH_WORKSPACE = tuple(map(tuple, OmegaConf.load(Path(__file__).parents[2] / "conf/env/push.yaml").gripper_workspace))
 
 
 def sparse_reward(achieved_goal: torch.Tensor, desired_goal: torch.Tensor) -> torch.Tensor:

@@ -3,16 +3,16 @@ import numpy as np
 import pytest
 import torch
 
-from tests.replay.conftest import T, make_episodes, sparse_reward
+from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
 from tests.replay.test_her import decode, labelled_episodes
-from torchrl_cebp.replay import make_replay_buffer
+from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
 from torchrl_cebp.samplers import CEBPSampler, InitialCEBPSampler, ReleasedCEBPSampler, CPERSampler, EBPSampler, MEPSampler, PERSampler, UniformEpisodeSampler
 
 SAMPLERS = {  # each built for a buffer of the given capacity
     "uniform": lambda capacity: UniformEpisodeSampler(),
-    "cebp": lambda capacity: CEBPSampler("push"),
-    "cebp_released": lambda capacity: ReleasedCEBPSampler("push"),
-    "cebp_initial": lambda capacity: InitialCEBPSampler("push"),
+    "cebp": lambda capacity: CEBPSampler(),
+    "cebp_released": lambda capacity: ReleasedCEBPSampler(workspace=PUSH_WORKSPACE),
+    "cebp_initial": lambda capacity: InitialCEBPSampler(workspace=PUSH_WORKSPACE),
     "cper": lambda capacity: CPERSampler(),
     "ebp": lambda capacity: EBPSampler(),
     "mep": lambda capacity: MEPSampler(),
@@ -23,7 +23,7 @@ SAMPLERS = {  # each built for a buffer of the given capacity
 @pytest.mark.parametrize("name", sorted(SAMPLERS))
 def test_wrap_around_keeps_episodes_whole_and_priorities_fresh(name):
     sampler = SAMPLERS[name](5 * T)
-    rb = make_replay_buffer(sampler, reward_fn=sparse_reward, capacity=5 * T, batch_size=4096, future_p=1.0)
+    rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward, future_p=1.0), capacity=5 * T, batch_size=4096)
     for first in range(0, 8, 2):  # 8 episodes into 5 rows, two at a time
         rb.extend(labelled_episodes(2, first_id=first))
     stored_ids = rb.storage[torch.arange(5)]["achieved_goal"][..., 0]
@@ -36,7 +36,7 @@ def test_wrap_around_keeps_episodes_whole_and_priorities_fresh(name):
     assert torch.equal(episode, decode(batch["achieved_goal"])[0])
     assert (state > batch["index"][:, 1]).all()
     if hasattr(sampler, "probabilities"):
-        fresh = make_replay_buffer(SAMPLERS[name](5 * T), reward_fn=sparse_reward, capacity=5 * T)
+        fresh = make_replay_buffer(SAMPLERS[name](5 * T), HindsightRelabel(sparse_reward), capacity=5 * T)
         fresh.extend(rb.storage[torch.arange(5)])
         if isinstance(sampler, MEPSampler):
             fresh.sampler.refit(fresh.storage)
@@ -47,7 +47,7 @@ def test_wrap_around_keeps_episodes_whole_and_priorities_fresh(name):
 @pytest.mark.parametrize("name", sorted(SAMPLERS))
 def test_save_load_then_draw_gives_the_same_batches(name, tmp_path):
     def filled():
-        rb = make_replay_buffer(SAMPLERS[name](20 * T), reward_fn=sparse_reward, capacity=20 * T, batch_size=64)
+        rb = make_replay_buffer(SAMPLERS[name](20 * T), HindsightRelabel(sparse_reward), capacity=20 * T, batch_size=64)
         rb.extend(make_episodes(12, seed=3))
         if isinstance(rb.sampler, MEPSampler):
             rb.sampler.refit(rb.storage)
@@ -61,7 +61,7 @@ def test_save_load_then_draw_gives_the_same_batches(name, tmp_path):
     original = filled()
     original.dumps(tmp_path)
     expected = draws(original)
-    restored = make_replay_buffer(SAMPLERS[name](20 * T), reward_fn=sparse_reward, capacity=20 * T, batch_size=64)
+    restored = make_replay_buffer(SAMPLERS[name](20 * T), HindsightRelabel(sparse_reward), capacity=20 * T, batch_size=64)
     restored.loads(tmp_path)
     got = draws(restored)
     for a, b in zip(expected, got):
@@ -73,10 +73,10 @@ def test_save_load_then_draw_gives_the_same_batches(name, tmp_path):
 
 
 def test_sampler_state_dict_round_trip_without_pickled_code(tmp_path):
-    rb = make_replay_buffer(CEBPSampler("push"), reward_fn=sparse_reward, capacity=20 * T)
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=20 * T)
     rb.extend(make_episodes(5))
     torch.save(rb.sampler.state_dict(), tmp_path / "s.pt")
-    sampler = CEBPSampler("push")
+    sampler = CEBPSampler()
     sampler.load_state_dict(torch.load(tmp_path / "s.pt", weights_only=True))
     torch.testing.assert_close(sampler.probabilities(torch.arange(5)), rb.sampler.probabilities(torch.arange(5)))
 
@@ -84,8 +84,8 @@ def test_sampler_state_dict_round_trip_without_pickled_code(tmp_path):
 @pytest.mark.parametrize(
     "sampler, key, shape",
     [
-        (lambda: CEBPSampler("push"), ("next", "touch"), "[n_episodes, T, 2]"),
-        (lambda: ReleasedCEBPSampler("push"), ("next", "observation"), "[n_episodes, T, *]"),
+        (lambda: CEBPSampler(), ("next", "touch"), "[n_episodes, T, 2]"),
+        (lambda: ReleasedCEBPSampler(workspace=PUSH_WORKSPACE), ("next", "observation"), "[n_episodes, T, *]"),
         (CPERSampler, ("next", "touch"), "[n_episodes, T, 2]"),
         (EBPSampler, ("next", "achieved_goal"), "[n_episodes, T, 3]"),
     ],
@@ -93,7 +93,7 @@ def test_sampler_state_dict_round_trip_without_pickled_code(tmp_path):
 def test_missing_key_is_named_with_its_expected_shape(sampler, key, shape):
     data = make_episodes(2)
     del data[key]
-    rb = make_replay_buffer(sampler(), reward_fn=sparse_reward, capacity=10 * T)
+    rb = make_replay_buffer(sampler(), HindsightRelabel(sparse_reward), capacity=10 * T)
     with pytest.raises(KeyError) as error:
         rb.extend(data)
     message = error.value.args[0]
@@ -103,13 +103,13 @@ def test_missing_key_is_named_with_its_expected_shape(sampler, key, shape):
 def test_misshaped_key_is_named_with_its_expected_shape():
     data = make_episodes(2)
     data["next", "touch"] = torch.zeros(2, T, 3)
-    rb = make_replay_buffer(CEBPSampler("push"), reward_fn=sparse_reward, capacity=10 * T)
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=10 * T)
     with pytest.raises(ValueError, match=r"\('next', 'touch'\).*\[2, 50, 3\].*\[n_episodes, T, 2\]"):
         rb.extend(data)
 
 
 def test_episodes_of_another_length_are_refused():
-    rb = make_replay_buffer(reward_fn=sparse_reward, capacity=10 * T)
+    rb = make_replay_buffer(None, HindsightRelabel(sparse_reward), capacity=10 * T)
     rb.extend(make_episodes(2))
     with pytest.raises(ValueError, match="70 steps.*50-step"):
         rb.extend(make_episodes(1, length=70))
@@ -117,18 +117,17 @@ def test_episodes_of_another_length_are_refused():
 
 def test_bad_storage_kind_lists_the_valid_ones():
     with pytest.raises(ValueError, match="'ssd'.*memmap.*tensor"):
-        make_replay_buffer(reward_fn=sparse_reward, storage="ssd")
+        make_replay_buffer(None, HindsightRelabel(sparse_reward), storage="ssd")
 
 
 def test_memmap_storage(tmp_path):
-    rb = make_replay_buffer(CEBPSampler("push"), reward_fn=sparse_reward, capacity=10 * T, storage="memmap",
-                            scratch_dir=str(tmp_path), batch_size=32)
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=10 * T, storage="memmap", scratch_dir=str(tmp_path), batch_size=32)
     rb.extend(make_episodes(3))
     assert rb.sample()["priority_weight"].shape == (32,)
 
 
 def test_per_state_dict_loads_with_weights_only(tmp_path):
-    rb = make_replay_buffer(PERSampler(10 * T), reward_fn=sparse_reward, capacity=10 * T, batch_size=16)
+    rb = make_replay_buffer(PERSampler(10 * T), HindsightRelabel(sparse_reward), capacity=10 * T, batch_size=16)
     rb.extend(make_episodes(3))
     batch = rb.sample()
     batch.set("td_error", torch.linspace(0.1, 5.0, 16))
@@ -136,6 +135,6 @@ def test_per_state_dict_loads_with_weights_only(tmp_path):
     torch.save(rb.sampler.state_dict(), tmp_path / "per.pt")
     restored = PERSampler(10 * T)
     restored.load_state_dict(torch.load(tmp_path / "per.pt", weights_only=True))
-    assert restored.draws == rb.sampler.draws == 1
+    assert restored.beta == rb.sampler.beta
     every = torch.arange(10 * T)
     assert torch.equal(torch.as_tensor(restored._sum_tree[every]), torch.as_tensor(rb.sampler._sum_tree[every]))

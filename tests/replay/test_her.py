@@ -1,8 +1,9 @@
-"""HER relabelling: goals from later next-states of the same episode, rewards recomputed."""
+"""HER relabelling: goals from later next-states of the same episode, rewards recomputed, before the transforms."""
 import pytest
 import torch
 from tensordict import TensorDict
-from torchrl.data import RandomSampler, TensorDictReplayBuffer
+from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
+from torchrl.envs import Compose, ObservationNorm, RewardScaling
 
 from tests.replay.conftest import T, make_episodes, sparse_reward
 from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, make_replay_buffer
@@ -22,14 +23,15 @@ def decode(goal):
     return goal[:, 0].round().long(), (goal[:, 1] * 100).round().long()
 
 
-ALL_SAMPLERS = [UniformEpisodeSampler, lambda: CEBPSampler("push"), CPERSampler, EBPSampler, MEPSampler,
-                lambda: PERSampler(20 * T), RandomSampler]
+ALL_SAMPLERS = [UniformEpisodeSampler, lambda: CEBPSampler(), CPERSampler, EBPSampler, MEPSampler,
+                lambda: PERSampler(20 * T), RandomSampler, lambda: PrioritizedSampler(20 * T, alpha=0.6, beta=0.4)]
 
 
 @pytest.mark.parametrize("make_sampler", ALL_SAMPLERS)
 def test_future_goals_come_from_a_later_state_of_the_same_episode(make_sampler):
+    her = HindsightRelabel(sparse_reward, future_p=1.0)
     rb = TensorDictReplayBuffer(storage=EpisodeStorage(20 * T), sampler=make_sampler(), dim_extend=0, batch_size=2048,
-                                sample_unit=HindsightRelabel(sparse_reward, future_p=1.0))
+                                sample_unit=her, collate_fn=her.collate)
     rb.extend(labelled_episodes(8))
     torch.manual_seed(0)
     batch = rb.sample()
@@ -46,8 +48,9 @@ def test_future_goals_come_from_a_later_state_of_the_same_episode(make_sampler):
 
 
 def test_future_goal_distribution_is_uniform_over_later_states():
+    her = HindsightRelabel(sparse_reward, future_p=1.0)
     rb = TensorDictReplayBuffer(storage=EpisodeStorage(4 * T), sampler=UniformEpisodeSampler(), dim_extend=0,
-                                batch_size=50_000, sample_unit=HindsightRelabel(sparse_reward, future_p=1.0))
+                                batch_size=50_000, sample_unit=her, collate_fn=her.collate)
     rb.extend(labelled_episodes(2))
     torch.manual_seed(0)
     batch = rb.sample()
@@ -60,7 +63,7 @@ def test_future_goal_distribution_is_uniform_over_later_states():
 
 
 def test_future_p_is_a_per_sample_coin():
-    rb = make_replay_buffer(reward_fn=sparse_reward, capacity=10 * T, batch_size=20_000, future_p=0.8)
+    rb = make_replay_buffer(None, HindsightRelabel(sparse_reward, future_p=0.8), capacity=10 * T, batch_size=20_000)
     rb.extend(labelled_episodes(4))
     torch.manual_seed(0)
     batch = rb.sample()
@@ -73,7 +76,7 @@ def test_future_p_is_a_per_sample_coin():
 
 @pytest.mark.parametrize("strategy", ["final", "episode"])
 def test_final_and_episode_strategies(strategy):
-    rb = make_replay_buffer(reward_fn=sparse_reward, capacity=10 * T, batch_size=4096, future_p=1.0, strategy=strategy)
+    rb = make_replay_buffer(None, HindsightRelabel(sparse_reward, future_p=1.0, strategy=strategy), capacity=10 * T, batch_size=4096)
     rb.extend(labelled_episodes(4))
     batch = rb.sample()
     episode, state = decode(batch["desired_goal"])
@@ -92,8 +95,52 @@ def test_bad_strategy_and_probability_are_named():
 
 
 def test_slide_length_episodes():
-    rb = make_replay_buffer(reward_fn=sparse_reward, capacity=10 * 70, batch_size=4096, future_p=1.0)
+    rb = make_replay_buffer(None, HindsightRelabel(sparse_reward, future_p=1.0), capacity=10 * 70, batch_size=4096)
     rb.extend(labelled_episodes(3, length=70))
     batch = rb.sample()
     _, state = decode(batch["desired_goal"])
     assert (state >= batch["index"][:, 1] + 1).all() and state.max() == 70
+
+
+@pytest.mark.parametrize("make_sampler", [UniformEpisodeSampler, RandomSampler, lambda: PrioritizedSampler(20 * T, 0.6, 0.4)])
+def test_stock_transforms_see_the_relabelled_reward_and_goal(make_sampler):
+    her = HindsightRelabel(sparse_reward, future_p=1.0)
+    transform = Compose(
+        RewardScaling(loc=0.0, scale=10.0, in_keys=[("next", "reward")]),
+        ObservationNorm(loc=0.0, scale=2.0, in_keys=["desired_goal"], standard_normal=False),
+    )
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(20 * T), sampler=make_sampler(), dim_extend=0, batch_size=2048,
+                                sample_unit=her, collate_fn=her.collate, transform=transform)
+    rb.extend(labelled_episodes(8))
+    batch = rb.sample()
+    goal = batch["desired_goal"] / 2  # the transform doubled the relabelled goal
+    episode, state = decode(goal)
+    assert torch.equal(episode, decode(batch["achieved_goal"])[0])
+    assert (state >= batch["index"][:, 1] + 1).all()
+    reward = batch["next", "reward"]
+    assert set(reward.unique().tolist()) == {-10.0, 0.0}  # scaled after relabelling: successes and failures
+    assert torch.equal(reward, 10 * sparse_reward(batch["next", "achieved_goal"], goal))
+    assert batch["her_relabelled"].all()
+
+
+def test_the_buffer_generator_drives_every_draw_of_a_sample():
+    def batch(seed, global_seed):
+        rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward, future_p=0.5), capacity=10 * T,
+                                batch_size=512, generator=torch.Generator().manual_seed(seed))
+        rb.extend(labelled_episodes(6))
+        torch.manual_seed(global_seed)
+        return rb.sample()
+
+    first, again, other = batch(3, global_seed=0), batch(3, global_seed=1), batch(4, global_seed=0)
+    for key in ("index", "desired_goal", "her_relabelled"):
+        assert torch.equal(first[key], again[key])  # the global RNG played no part
+    assert not torch.equal(first["desired_goal"], other["desired_goal"])
+
+
+def test_a_buffer_given_her_only_as_sample_unit_fails_loudly():
+    her = HindsightRelabel(sparse_reward)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(10 * T), dim_extend=0, batch_size=8, sample_unit=her)
+    rb.extend(labelled_episodes(2))
+    rb.sample()
+    with pytest.raises(RuntimeError, match="collate_fn=her.collate"):
+        rb.sample()

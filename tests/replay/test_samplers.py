@@ -8,8 +8,9 @@ from scipy.stats import chisquare, rankdata
 from tensordict import TensorDict
 from torchrl.data import TensorDictReplayBuffer
 
-from tests.replay.conftest import T, make_episodes
-from torchrl_cebp.replay import EpisodeStorage
+from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes
+from torchrl_cebp.replay import EpisodeStorage, episode_lengths
+from torchrl_cebp.replay.episodes import valid_steps
 from torchrl_cebp.samplers import (
     CEBPSampler,
     InitialCEBPSampler,
@@ -91,7 +92,7 @@ def test_uniform_frequencies():
 
 @pytest.mark.parametrize("temperature", [0.01, 5.0, 50.0])
 def test_cebp_paper_frequencies_and_weights(temperature):
-    sampler = CEBPSampler("push", temperature=temperature, beta=0.7)
+    sampler = CEBPSampler(temperature=temperature, beta=0.7)
     rb, data = buffer(sampler)
     priority = np_paper_cebp(data, 100.0, temperature)
     assert_frequencies(counts(rb), priority)
@@ -102,7 +103,7 @@ def test_cebp_paper_frequencies_and_weights(temperature):
 
 
 def test_cebp_released_frequencies_and_weights():
-    sampler = ReleasedCEBPSampler("push")
+    sampler = ReleasedCEBPSampler(workspace=PUSH_WORKSPACE)
     rb, data = buffer(sampler)
     priority = np_released_cebp(data, 0.1, np.array([1.05, 0.4, 0.4]), np.array([1.55, 1.11, np.inf]))
     assert len(set(np.round(priority, 6))) > 3  # the hand-made episodes are told apart
@@ -112,7 +113,7 @@ def test_cebp_released_frequencies_and_weights():
 
 
 def test_cebp_released_weights_after_warmup():
-    sampler = ReleasedCEBPSampler("push")
+    sampler = ReleasedCEBPSampler(workspace=PUSH_WORKSPACE)
     rb = TensorDictReplayBuffer(storage=EpisodeStorage(300 * T), sampler=sampler, dim_extend=0, batch_size=512)
     data = torch.cat([hand_made(6, seed=s) for s in range(50)])
     rb.extend(data)
@@ -132,7 +133,7 @@ def np_initial_cebp(data, low, high):
 
 
 def test_cebp_initial_frequencies_and_weights():
-    rb, data = buffer(InitialCEBPSampler("push"))
+    rb, data = buffer(InitialCEBPSampler(workspace=PUSH_WORKSPACE))
     priority = np_initial_cebp(data, np.array([1.05, 0.4, 0.4]), np.array([1.55, 1.11, np.inf]))
     assert len(set(np.round(priority, 6))) > 3
     assert_frequencies(counts(rb), priority)
@@ -140,7 +141,7 @@ def test_cebp_initial_frequencies_and_weights():
 
 
 def test_cebp_initial_weights_after_warmup():
-    rb = TensorDictReplayBuffer(storage=EpisodeStorage(300 * T), sampler=InitialCEBPSampler("push"), dim_extend=0,
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(300 * T), sampler=InitialCEBPSampler(workspace=PUSH_WORKSPACE), dim_extend=0,
                                 batch_size=512)
     data = torch.cat([hand_made(6, seed=s) for s in range(50)])
     rb.extend(data)
@@ -213,15 +214,22 @@ def test_per_new_transitions_at_max_priority_then_td_error():
     target = batch["index"][0]
     drawn = rb.sample()["index"]
     assert (drawn == target).all(-1).float().mean() > 0.9
+
+    scheduler = sampler.beta_scheduler()
     betas = []
     for _ in range(5):
         rb.sample()
+        scheduler.step()
         betas.append(sampler.beta)
-    assert betas[0] == pytest.approx(0.4 + 0.6 * 2 / 4) and betas[-1] == pytest.approx(1.0)
+    assert sampler.beta_end == 1.0
+    assert betas[0] == pytest.approx(0.4 + 0.6 / 4) and betas[-1] == pytest.approx(1.0)
+    restarted = PERSampler(50 * T, beta_anneal_draws=4).beta_scheduler()
+    restarted.load_state_dict(scheduler.state_dict())
+    assert restarted._step_cnt == 5
 
 
 def test_a_draw_never_returns_unwritten_rows():
-    for sampler in (UniformEpisodeSampler(), CEBPSampler("push"), CPERSampler(), EBPSampler()):
+    for sampler in (UniformEpisodeSampler(), CEBPSampler(), CPERSampler(), EBPSampler()):
         rb = TensorDictReplayBuffer(storage=EpisodeStorage(1000 * T), sampler=sampler, dim_extend=0, batch_size=4096)
         rb.extend(hand_made(3))
         assert rb.sample()["index"][:, 0].max() <= 2
@@ -233,6 +241,8 @@ def test_released_cebp_mask_from_the_named_layout_repeats_the_recorded_prioritie
     # workspace box, so the mask decides part of it.
     recorded = torch.load(Path(__file__).parent / "data" / "released_cebp_mocap_push.pt", weights_only=True)
     episodes = TensorDict(recorded["episodes"], [6, T])
-    priority = ReleasedCEBPSampler("push").episode_priority(episodes)
+    valid = valid_steps(episode_lengths(episodes), T)
+    assert valid.all()
+    priority = ReleasedCEBPSampler(workspace=PUSH_WORKSPACE).episode_priority(episodes, valid)
     torch.testing.assert_close(priority, recorded["priority"], rtol=1e-12, atol=0.0)
     assert priority.min() < 1e-4 < priority.max()

@@ -1,13 +1,14 @@
 """Episode replay: storage of ``[episode, t]`` rows, HER relabelling, and the samplers."""
-from torchrl_cebp.replay.buffer import EpisodeReplayBuffer, episode_storage, make_replay_buffer
+from torchrl_cebp.replay.buffer import episode_storage, make_replay_buffer
+from torchrl_cebp.replay.episodes import episode_lengths
 from torchrl_cebp.replay.her import HindsightRelabel
 from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage
 
 __all__ = [
-    "EpisodeReplayBuffer",
     "EpisodeMemmapStorage",
     "EpisodeStorage",
     "HindsightRelabel",
+    "episode_lengths",
     "episode_storage",
     "make_replay_buffer",
 ]

@@ -1,14 +1,18 @@
-"""Hindsight Experience Replay relabelling that composes with any sampler."""
+"""Hindsight Experience Replay relabelling that composes with any sampler and any buffer transform."""
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Any, Literal
 
 import torch
+from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.data.replay_buffers.sample_units import SampleUnit
 from torchrl.data.replay_buffers.storages import Storage
 
+from torchrl_cebp.replay import _upstream
+from torchrl_cebp.replay.episodes import episode_lengths, next_key
 from torchrl_cebp.replay.samplers.base import split_index
 
 RewardFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
@@ -16,52 +20,64 @@ STRATEGIES = ("future", "final", "episode")
 
 
 class HindsightRelabel(SampleUnit):
-    """Replaces the desired goal of sampled transitions by a goal the episode achieved.
+    """Replaces the goal of sampled transitions by a goal the episode achieved, before the buffer's transforms.
 
-    Plugged into a stock :class:`~torchrl.data.TensorDictReplayBuffer` as its
-    ``sample_unit`` over an episode storage (``ndim=2``), it works with any
-    sampler, ours or TorchRL's. For each sampled transition ``(e, t)`` a coin
-    with probability ``future_p`` decides whether to relabel; the new goal is
-    the achieved goal of a next-state of the same episode:
+    Give one instance to a stock :class:`~torchrl.data.TensorDictReplayBuffer` over an episode
+    storage (``ndim=2``) twice: as its ``sample_unit`` (which sees the drawn ``(episode, step)``
+    pairs and the storage) and as its ``collate_fn`` (which writes the new goals and rewards into
+    the batch read from the storage). The buffer calls the collate function before its transforms,
+    so every transform sees, and may change, the relabelled goal and reward. Any sampler works,
+    ours or TorchRL's (``RandomSampler``, ``PrioritizedSampler``).
 
-    * ``"future"``: state ``t' = t + 1 + floor(U * (T - t))``, i.e. a *later*
-      next-state, never the current state, possibly the final one (baselines' HER);
+    For each sampled transition ``(e, t)`` a coin with probability ``future_p`` decides whether to
+    relabel; the new goal is the achieved goal of a next-state of the same episode:
+
+    * ``"future"``: state ``t' = t + 1 + floor(U * (L - t))``, a *later* next-state, never the
+      current state, possibly the final one (baselines' HER);
     * ``"final"``: the episode's final state;
     * ``"episode"``: any next-state of the episode, uniformly.
 
-    ``desired_goal`` and ``("next", "desired_goal")`` get the new goal and
-    ``("next", "reward")`` is recomputed for the whole batch in one call of
-    ``reward_fn(achieved_goal, desired_goal)`` (e.g. the env's ``compute_reward``).
-    A TorchRL sample unit is used rather than a transform because a buffer's
-    transforms run before the sampled indices are known, and relabelling needs
-    them to reach later steps of the same episode.
+    ``L`` is the episode's valid length: the step after its first ``end_key`` (``("next", "done")``)
+    flag, or the row length without one. No goal comes from beyond it.
+
+    How this differs from :class:`torchrl.data.HERReplayBuffer`: that buffer relabels the first
+    ``her_ratio`` of each batch after the transforms, over a flat storage, and "future" may pick the
+    transition's own state; here each transition tosses its own ``future_p`` coin, goals come from a
+    strictly later next-state, the relabelling happens before the transforms, and episodes are rows.
 
     Args:
-        reward_fn: vectorised sparse reward, ``[..., 3], [..., 3] -> [..., 1]``.
+        reward_fn: vectorised sparse reward, ``[..., 3], [..., 3] -> [..., 1]`` (e.g. the env's
+            ``compute_reward``).
         future_p: probability to relabel a transition (0.8 is HER's replay_k=4).
         strategy: ``"future"``, ``"final"`` or ``"episode"``.
-        achieved_goal_key, desired_goal_key: keys of the goals at the root; the
-            ``"next"`` counterparts are used for next-states and rewards.
+        goal_key, achieved_goal_key: keys of the goals at the root; their ``"next"`` counterparts
+            hold the next-states' goals.
         reward_key: where the recomputed reward goes.
-        relabelled_key: a bool entry telling which transitions were relabelled
+        end_key: the flag that ends an episode before its row does.
+        relabelled_key: a bool entry of the sample info telling which transitions were relabelled
             (``None`` to omit it).
+        generator: random source of the coin and the goal choice; by default the generator the
+            buffer was given (``generator=`` or ``set_rng``), else torch's global one.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
-        >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer, RandomSampler
+        >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+        >>> from torchrl.envs import RewardScaling
         >>> from torchrl_cebp.replay import HindsightRelabel
         >>> T = 50
         >>> reward = lambda ag, g: -(torch.linalg.vector_norm(ag - g, dim=-1, keepdim=True) > 0.05).float()
         >>> episodes = TensorDict({"desired_goal": torch.zeros(4, T, 3),
         ...     "next": {"achieved_goal": torch.rand(4, T, 3), "desired_goal": torch.zeros(4, T, 3),
         ...              "reward": torch.zeros(4, T, 1)}}, [4, T])
-        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * T, ndim=2), dim_extend=0,
-        ...                             batch_size=8, sample_unit=HindsightRelabel(reward, future_p=1.0))
+        >>> her = HindsightRelabel(reward, future_p=1.0)
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * T, ndim=2), dim_extend=0, batch_size=8,
+        ...                             sample_unit=her, collate_fn=her.collate,
+        ...                             transform=RewardScaling(loc=0.0, scale=10.0, in_keys=[("next", "reward")]))
         >>> _ = rb.extend(episodes)
         >>> batch = rb.sample()
-        >>> bool((batch["desired_goal"] != 0).all())
-        True
+        >>> bool((batch["desired_goal"] != 0).all()), set(batch["next", "reward"].unique().tolist()) <= {-10.0, 0.0}
+        (True, True)
     """
 
     def __init__(
@@ -70,9 +86,10 @@ class HindsightRelabel(SampleUnit):
         *,
         future_p: float = 0.8,
         strategy: Literal["future", "final", "episode"] = "future",
+        goal_key: NestedKey = "desired_goal",
         achieved_goal_key: NestedKey = "achieved_goal",
-        desired_goal_key: NestedKey = "desired_goal",
         reward_key: NestedKey = ("next", "reward"),
+        end_key: NestedKey = ("next", "done"),
         relabelled_key: NestedKey | None = "her_relabelled",
         generator: torch.Generator | None = None,
     ) -> None:
@@ -83,53 +100,98 @@ class HindsightRelabel(SampleUnit):
         self.reward_fn = reward_fn
         self.future_p = float(future_p)
         self.strategy = strategy
-        self.desired_goal_key = desired_goal_key
-        self.next_achieved_goal_key = _next(achieved_goal_key)
-        self.next_desired_goal_key = _next(desired_goal_key)
+        self.goal_key = goal_key
+        self.next_goal_key = next_key(goal_key)
+        self.next_achieved_goal_key = next_key(achieved_goal_key)
         self.reward_key = reward_key
+        self.end_key = end_key
         self.relabelled_key = relabelled_key
-        self._rng = generator
+        self.generator = generator
+        self._pending = threading.local()  # expand() -> collate() of one draw, per sampling thread
 
-    def goal_steps(self, steps: torch.Tensor, episode_length: int) -> torch.Tensor:
+    def goal_steps(
+        self, steps: torch.Tensor, lengths: torch.Tensor, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
         """Index ``j`` into the ``("next", ...)`` entries whose achieved goal becomes the new goal.
 
-        ``("next", key)[e, j]`` is state ``j + 1``, so "future" draws ``j`` in ``[t, T - 1]``.
+        ``("next", key)[e, j]`` is state ``j + 1``, so "future" draws ``j`` in ``[t, L - 1]``.
         """
+        last = lengths - 1
         if self.strategy == "final":
-            return torch.full_like(steps, episode_length - 1)
-        uniform = torch.rand(steps.shape, generator=self._rng)
+            return last.clone()
+        uniform = torch.rand(steps.shape, generator=generator)
         if self.strategy == "episode":
-            return (uniform * episode_length).long().clamp_(max=episode_length - 1)
-        offset = (uniform * (episode_length - steps)).long()
-        return (steps + offset).clamp_(max=episode_length - 1)
+            return torch.minimum((uniform * lengths).long(), last)
+        offset = (uniform * (lengths - steps).clamp(min=0)).long()
+        return torch.minimum(steps + offset, last)
 
-    def expand(
-        self, index: torch.Tensor | tuple, info: dict[str, Any], storage: Storage
-    ) -> tuple[torch.Tensor | tuple, dict[str, Any]]:
-        rows, steps = split_index(index)
-        data = storage._storage
-        episode_length = data.shape[1]
+    def relabel(
+        self,
+        episodes: TensorDictBase,
+        rows: torch.Tensor,
+        steps: torch.Tensor,
+        generator: torch.Generator | None = None,
+    ) -> dict[NestedKey, torch.Tensor]:
+        """The relabelled goal, next goal, reward and coin of transitions ``(rows, steps)`` of ``[N, T]`` episodes.
+
+        The one relabelling both the replay draw and the trainer's normaliser feed use.
+        """
+        generator = self.generator if generator is None else generator
+        episode_steps = episodes.shape[1]
+        lengths = episode_lengths(episodes, self.end_key, rows)
         # Flat views + index_select: much cheaper than 2-D advanced indexing.
-        next_achieved = data.get(self.next_achieved_goal_key).flatten(0, 1)
-        stored_goal = data.get(self.desired_goal_key).flatten(0, 1)
-        first_step = rows * episode_length
-        relabel = torch.rand(steps.shape, generator=self._rng) < self.future_p
-        goal_steps = self.goal_steps(steps, episode_length)
+        next_achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1)
+        stored_goal = episodes.get(self.goal_key).flatten(0, 1)
+        first_step = rows * episode_steps
+        relabel = torch.rand(steps.shape, generator=generator) < self.future_p
+        goal_steps = self.goal_steps(steps, lengths, generator)
         goal = torch.where(
             relabel.unsqueeze(-1),
             next_achieved.index_select(0, first_step + goal_steps),
             stored_goal.index_select(0, first_step + steps),
         )
-        info[self.desired_goal_key] = goal
-        info[self.next_desired_goal_key] = goal
-        info[self.reward_key] = self.reward_fn(next_achieved.index_select(0, first_step + steps), goal)
+        entries: dict[NestedKey, torch.Tensor] = {
+            self.goal_key: goal,
+            self.next_goal_key: goal,
+            self.reward_key: self.reward_fn(next_achieved.index_select(0, first_step + steps), goal),
+        }
         if self.relabelled_key is not None:
-            info[self.relabelled_key] = relabel
+            entries[self.relabelled_key] = relabel
+        return entries
+
+    # ---- the two hooks of a TorchRL buffer -----------------------------------------
+    def expand(
+        self, index: torch.Tensor | tuple, info: dict[str, Any], storage: Storage
+    ) -> tuple[torch.Tensor | tuple, dict[str, Any]]:
+        if getattr(self._pending, "entries", None) is not None:
+            self._pending.entries = None
+            raise RuntimeError(
+                "HindsightRelabel's previous draw was never written into its batch: give the buffer "
+                "the same instance as collate_fn too, e.g. TensorDictReplayBuffer(sample_unit=her, "
+                "collate_fn=her.collate, ...)"
+            )
+        rows, steps = split_index(index)
+        generator = self.generator if self.generator is not None else _upstream.buffer_generator(storage)
+        # A slice of a tensor storage is a view: no copy of the buffer.
+        entries = self.relabel(storage.get(slice(None)), rows, steps, generator)
+        if self.relabelled_key is not None:
+            info[self.relabelled_key] = entries.pop(self.relabelled_key)
+        self._pending.entries = entries
         return index, info
+
+    def collate(self, data: TensorDictBase) -> TensorDictBase:
+        """The buffer's ``collate_fn``: writes the goals and rewards of the last :meth:`expand` into ``data``."""
+        entries = getattr(self._pending, "entries", None)
+        if entries is None:
+            raise RuntimeError(
+                "HindsightRelabel.collate ran without a draw: give the buffer the same instance as "
+                "sample_unit too"
+            )
+        self._pending.entries = None
+        for key, value in entries.items():
+            data.set(key, value)
+        return data
 
     def __repr__(self) -> str:
         return f"HindsightRelabel(strategy={self.strategy!r}, future_p={self.future_p})"
 
-
-def _next(key: NestedKey) -> tuple[str, ...]:
-    return ("next", *((key,) if isinstance(key, str) else key))

@@ -9,11 +9,11 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage
 
+from torchrl_cebp.replay import _upstream
+
 
 class _EpisodeRows:
     """Writes must be whole episodes of one fixed length (the storage's second dimension)."""
-
-    _storage: TensorDictBase
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if isinstance(data, TensorDictBase):
@@ -22,10 +22,10 @@ class _EpisodeRows:
                     "episode storages take whole episodes shaped [n_episodes, T], "
                     f"got batch shape {list(data.shape)}"
                 )
-            if self.initialized and data.shape[1] != self._storage.shape[1]:
+            if self.initialized and data.shape[1] != self.shape[1]:
                 raise ValueError(
                     f"episodes of {data.shape[1]} steps cannot go into a storage of "
-                    f"{self._storage.shape[1]}-step episodes"
+                    f"{self.shape[1]}-step episodes"
                 )
         super().set(cursor, data, set_cursor=set_cursor)
 
@@ -86,8 +86,8 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
 
     def _layout(self) -> tuple[dict[torch.dtype, torch.Tensor], list[_Field]]:
         """The dtype blocks and where each entry sits in them; (re)built when the storage is replaced."""
-        if self._layout_source is not self._storage:
-            storage = self._storage
+        if self._layout_source is not _upstream.stored_tensordict(self):
+            storage = _upstream.stored_tensordict(self)
             fields, widths = [], {}
             for key, leaf in storage.items(True, True):
                 width = leaf[0, 0].numel()
@@ -104,7 +104,7 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
                 view = field.from_columns(blocks[field.dtype][..., field.start : field.stop])
                 view.copy_(storage.get(field.key))
                 packed.set(field.key, view)
-            self._storage = packed
+            _upstream.replace_stored_tensordict(self, packed)
             self._layout_source = packed
             self._blocks = {dtype: block.flatten(0, 1) for dtype, block in blocks.items()}
             self._fields = fields
@@ -114,7 +114,7 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         if not (self.initialized and _is_pair_index(index)):
             return super().get(index)
         blocks, fields = self._layout()
-        flat = index[0] * self._storage.shape[1] + index[1]
+        flat = index[0] * self.shape[1] + index[1]
         gathered = {dtype: block.index_select(0, flat) for dtype, block in blocks.items()}
         tree: dict = {}
         for field in fields:
@@ -123,16 +123,15 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             for parent in parents:
                 node = node.setdefault(parent, {})
             node[name] = field.from_columns(gathered[field.dtype][:, field.start : field.stop])
-        return _assemble(tree, flat.shape, self._storage.device)
+        return _assemble(tree, flat.shape, self.device)
 
 
 def _assemble(tree: dict, batch_size: torch.Size, device: torch.device | None) -> TensorDict:
-    # The fields were validated when the storage was built: skip TensorDict's per-entry checks.
     source = {
         name: _assemble(value, batch_size, device) if isinstance(value, dict) else value
         for name, value in tree.items()
     }
-    return TensorDict._new_unsafe(source=source, batch_size=batch_size, device=device)
+    return _upstream.unchecked_tensordict(source, batch_size, device)
 
 
 class EpisodeMemmapStorage(_EpisodeRows, LazyMemmapStorage):

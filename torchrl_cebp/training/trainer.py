@@ -22,7 +22,6 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictSequential
-from torchrl.data import LazyTensorStorage
 from torchrl.data.replay_buffers.samplers import Sampler
 from torchrl.envs import EnvBase, ParallelEnv
 from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -32,6 +31,7 @@ from tqdm import tqdm
 from torchrl_cebp.agents import HERDDPGLoss, make_critic
 from torchrl_cebp.envs import make_env_from_config
 from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+from torchrl_cebp.samplers import PERSampler
 from torchrl_cebp.training.checkpoint import (
     has_checkpoint,
     load_checkpoint,
@@ -62,26 +62,24 @@ class RelabelledTransitions:
 
     Baselines feeds its normaliser such relabelled transitions of each new batch of
     episodes, so the goal statistics cover the goals the networks are trained on
-    (independently of how the sampler draws from the buffer).
+    (independently of how the sampler draws from the buffer). It relabels through the
+    replay's own :meth:`HindsightRelabel.relabel`.
 
     Example:
         >>> from torchrl_cebp.envs import make_env
         >>> env = make_env("push", num_envs=2)
-        >>> feed = RelabelledTransitions(HindsightRelabel(env.compute_reward), n_episodes=2, episode_steps=50)
+        >>> feed = RelabelledTransitions(HindsightRelabel(env.compute_reward))
         >>> feed(env.rollout(50))["desired_goal"].shape
         torch.Size([100, 3])
     """
 
-    def __init__(self, her: HindsightRelabel, n_episodes: int, episode_steps: int) -> None:
+    def __init__(self, her: HindsightRelabel) -> None:
         self.her = her
-        self.scratch = LazyTensorStorage(n_episodes * episode_steps, ndim=2)
-        rows, steps = torch.meshgrid(torch.arange(n_episodes), torch.arange(episode_steps), indexing="ij")
-        self.index = (rows.reshape(-1), steps.reshape(-1))
 
     def __call__(self, episodes: TensorDictBase) -> TensorDictBase:
-        self.scratch.set(torch.arange(episodes.shape[0]), episodes)
-        _, info = self.her.expand(self.index, {}, self.scratch)
-        goal = info[self.her.desired_goal_key]
+        n_episodes, episode_steps = episodes.shape[:2]
+        rows, steps = torch.meshgrid(torch.arange(n_episodes), torch.arange(episode_steps), indexing="ij")
+        goal = self.her.relabel(episodes, rows.reshape(-1), steps.reshape(-1))[self.her.goal_key]
         return TensorDict({"observation": episodes["observation"].reshape(goal.shape[0], -1), "desired_goal": goal},
                           [goal.shape[0]])
 
@@ -175,19 +173,10 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     critic_optim = torch.optim.Adam(loss.value_network_params.values(True, True), lr=cfg.agent.lr_critic, fused=True)
 
     # Replay: whole episodes as rows, the configured sampler, HER relabelling at sampling time.
-    replay = make_replay_buffer(
-        sampler,
-        reward_fn=spec_env.compute_reward,
-        capacity=cfg.replay.capacity,
-        batch_size=cfg.batch_size * cfg.workers,
-        future_p=cfg.replay.future_p,
-        strategy=cfg.replay.strategy,
-    )
-    normalizer_feed = RelabelledTransitions(
-        HindsightRelabel(spec_env.compute_reward, future_p=cfg.replay.future_p, strategy=cfg.replay.strategy),
-        n_envs,
-        episode_steps,
-    )
+    her = HindsightRelabel(spec_env.compute_reward, future_p=cfg.replay.future_p, strategy=cfg.replay.strategy)
+    replay = make_replay_buffer(sampler, her, capacity=cfg.replay.capacity, batch_size=cfg.batch_size * cfg.workers)
+    normalizer_feed = RelabelledTransitions(her)
+    beta_scheduler = sampler.beta_scheduler() if isinstance(sampler, PERSampler) else None
 
     def collection_weights() -> dict[str, torch.Tensor]:
         return {key: value.detach().cpu() for key, value in exploration_policy.state_dict().items()}
@@ -201,6 +190,8 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         actor_optim.load_state_dict(state["actor_optim"])
         critic_optim.load_state_dict(state["critic_optim"])
         replay.load_state_dict(state["replay"])
+        if beta_scheduler is not None:
+            beta_scheduler.load_state_dict(state["beta_scheduler"])
         # Restored last, so that building the agent above draws nothing from the restored stream.
         set_rng_state(state["rng"])
         start_epoch, wall_before = state["epoch"] + 1, state["wall_s"]
@@ -236,6 +227,8 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
                 if threads != torch.get_num_threads():
                     torch.set_num_threads(threads)
                 batch = replay.sample().to(device)
+                if beta_scheduler is not None:
+                    beta_scheduler.step()
                 normalizer(batch)
                 normalizer(batch["next"])
                 with torch.autocast(device.type, dtype=torch.bfloat16, enabled=use_bf16):
@@ -299,6 +292,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
                 "actor_optim": actor_optim.state_dict(),
                 "critic_optim": critic_optim.state_dict(),
                 "replay": replay.state_dict(),
+                **({"beta_scheduler": beta_scheduler.state_dict()} if beta_scheduler is not None else {}),
                 "rng": rng_state(),
             },
             run_dir,

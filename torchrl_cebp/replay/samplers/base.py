@@ -3,7 +3,9 @@
 Every sampler here draws an *episode row* with probability proportional to a
 priority computed once, when the episode is written, and then a step inside
 it. Priorities live in a sum segment tree (TorchRL's C++ one), so a draw costs
-O(batch x log episodes) and never rescans the buffer.
+O(batch x log episodes) and never rescans the buffer. Episodes may end before
+their row does (an ``("next", "done")`` flag before ``T``): the steps after the
+end are padding, which priorities ignore and draws never return.
 """
 from __future__ import annotations
 
@@ -15,9 +17,10 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
-from torchrl.data.replay_buffers.samplers import SumSegmentTreeFp64
-from torchrl.data.replay_buffers.samplers import Sampler
+from torchrl.data.replay_buffers.samplers import Sampler, SumSegmentTreeFp64
 from torchrl.data.replay_buffers.storages import Storage
+
+from torchrl_cebp.replay.episodes import episode_lengths, valid_steps
 
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
 
@@ -86,9 +89,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     """Base class: draws episode rows by a per-episode priority, then a step.
 
     Subclasses implement :meth:`episode_priority`, mapping the ``[n, T]``
-    tensordict of freshly written episodes to ``n`` non-negative priorities,
-    and may override :meth:`step_weights` (non-uniform steps) and
-    :meth:`importance_weights`. Works with a stock
+    tensordict of freshly written episodes and its ``[n, T]`` mask of valid
+    (non-padding) steps to ``n`` non-negative priorities, and may override
+    :meth:`step_weights` (non-uniform steps) and :meth:`importance_weights`. Works with a stock
     :class:`~torchrl.data.TensorDictReplayBuffer` over
     ``LazyTensorStorage(capacity_in_transitions, ndim=2)``: the buffer's
     writer notifies the sampler through :meth:`mark_update` after each write,
@@ -96,7 +99,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     Args:
         generator (torch.Generator, optional): random source of the draws;
-            the global torch RNG when omitted.
+            the global torch RNG when omitted. A buffer's ``generator=`` (or
+            ``set_rng``) replaces it.
+        end_key (NestedKey): the flag that ends an episode before its row does.
 
     Examples:
         >>> import torch
@@ -105,7 +110,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         >>> from torchrl_cebp.replay import EpisodeStorage
         >>> class LongestReach(EpisodePrioritySampler):
         ...     "Episodes whose object travelled further are drawn more often."
-        ...     def episode_priority(self, episodes):
+        ...     def episode_priority(self, episodes, valid):
         ...         path = episodes["next", "achieved_goal"]
         ...         return (path[:, -1] - path[:, 0]).norm(dim=-1).double()
         >>> episodes = TensorDict({"next": {"achieved_goal": torch.zeros(2, 50, 3)}}, [2, 50])
@@ -117,20 +122,22 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         [1]
     """
 
-    def __init__(self, generator: torch.Generator | None = None) -> None:
+    def __init__(self, generator: torch.Generator | None = None, end_key: NestedKey = ("next", "done")) -> None:
         self._rng = generator
+        self.end_key = end_key
         self._priorities = torch.zeros(0, dtype=torch.float64)
+        self._lengths = torch.zeros(0, dtype=torch.long)
         self._cumulative_step_weights: torch.Tensor | None = None
         self._tree: SumSegmentTreeFp64 | None = None
         self._n_stored = 0
 
     # ---- what subclasses define -------------------------------------------------
     @abc.abstractmethod
-    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
-        """Priority of each episode of a ``[n, T]`` tensordict (shape ``[n]``, >= 0)."""
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Priority of each episode of a ``[n, T]`` tensordict (shape ``[n]``, >= 0) from its ``valid`` steps."""
 
-    def step_weights(self, episodes: TensorDictBase) -> torch.Tensor | None:
-        """Per-step sampling weights ``[n, T]``, or ``None`` for uniform steps."""
+    def step_weights(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor | None:
+        """Per-step sampling weights ``[n, T]`` (0 on padding), or ``None`` for uniform valid steps."""
         return None
 
     def importance_weights(
@@ -147,10 +154,11 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def _ensure_tree(self, storage: Storage) -> None:
         # The storage's row count is fixed once it holds data: one tree for its lifetime.
-        n_rows = storage._max_size_along_dim0()
+        n_rows = storage.max_size // storage.shape[1]
         if self._tree is None:
             self._tree = SumSegmentTreeFp64(n_rows)
             self._priorities = torch.zeros(n_rows, dtype=torch.float64)
+            self._lengths = torch.zeros(n_rows, dtype=torch.long)
         elif self._tree.size != n_rows:
             raise ValueError(
                 f"{type(self).__name__} holds priorities for {self._tree.size} episode rows, "
@@ -173,20 +181,23 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         rows = stored_rows(index)
         first, last = int(rows[0]), int(rows[-1])
         # A write is usually one run of consecutive rows: read it as a view, not a copy.
-        episodes = storage._storage[first : last + 1] if last - first + 1 == rows.numel() else storage[rows]
+        episodes = storage.get(slice(first, last + 1)) if last - first + 1 == rows.numel() else storage.get(rows)
         self._ensure_tree(storage)
         self.write_priorities(rows, episodes)
 
     def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase) -> None:
-        """Computes and stores the priorities of ``episodes`` written at ``rows``."""
-        priority = self.episode_priority(episodes).to(torch.float64)
+        """Computes and stores the priorities and valid lengths of ``episodes`` written at ``rows``."""
+        lengths = episode_lengths(episodes, self.end_key)
+        valid = valid_steps(lengths, episodes.shape[1])
+        priority = self.episode_priority(episodes, valid).to(torch.float64)
         if priority.shape != rows.shape or not torch.isfinite(priority).all() or (priority < 0).any():
             raise ValueError(
                 f"{type(self).__name__}.episode_priority must give {rows.numel()} finite "
                 f"non-negative priorities, got {priority}"
             )
         self.set_priorities(rows, priority)
-        steps = self.step_weights(episodes)
+        self._lengths[rows] = lengths
+        steps = self.step_weights(episodes, valid)
         if steps is not None:
             if self._cumulative_step_weights is None:
                 self._cumulative_step_weights = torch.zeros(
@@ -215,16 +226,15 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         # Float round-off at the very top of the range can land past the last stored row.
         return rows.clamp_(max=self._n_stored - 1)
 
-    def draw_steps(self, rows: torch.Tensor, episode_length: int) -> torch.Tensor:
-        """A step per drawn row: uniform, or by the cumulative step weights."""
+    def draw_steps(self, rows: torch.Tensor) -> torch.Tensor:
+        """A valid step per drawn row: uniform, or by the cumulative step weights."""
+        lengths = self._lengths[rows]
         if self._cumulative_step_weights is None:
-            return torch.randint(
-                episode_length, rows.shape, generator=self._rng, dtype=torch.long
-            )
+            return (self._uniform(rows.numel()) * lengths).long().clamp_(max=lengths - 1)
         cumulative = self._cumulative_step_weights[rows]
         mass = self._uniform(rows.numel(), 1) * cumulative[:, -1:]
         steps = torch.searchsorted(cumulative, mass, right=True).squeeze(-1)
-        return steps.clamp_(max=episode_length - 1)
+        return torch.minimum(steps, lengths - 1)
 
     def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
         """Probability of drawing each of ``rows`` under the current priorities."""
@@ -233,9 +243,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
         if self._n_stored == 0:
             raise RuntimeError(f"{type(self).__name__}: cannot sample from an empty buffer")
-        episode_length = storage.shape[1]
         rows = self.draw_episodes(batch_size)
-        steps = self.draw_steps(rows, episode_length)
+        steps = self.draw_steps(rows)
         info: dict[str, Any] = {}
         weights = self.importance_weights(self.probabilities(rows), self._n_stored)
         if weights is not None:
@@ -244,13 +253,14 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     # ---- state --------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
-        state = {"priorities": self._priorities.clone(), "n_stored": self._n_stored}
+        state = {"priorities": self._priorities.clone(), "lengths": self._lengths.clone(), "n_stored": self._n_stored}
         if self._cumulative_step_weights is not None:
             state["cumulative_step_weights"] = self._cumulative_step_weights.clone()
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         self._priorities = state_dict["priorities"].clone().to(torch.float64)
+        self._lengths = state_dict["lengths"].clone()
         self._n_stored = int(state_dict["n_stored"])
         steps = state_dict.get("cumulative_step_weights")
         self._cumulative_step_weights = None if steps is None else steps.clone()
@@ -260,6 +270,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def _empty(self) -> None:
         self._priorities.zero_()
+        self._lengths.zero_()
         if self._tree is not None:
             self._tree = SumSegmentTreeFp64(self._priorities.numel())
         self._cumulative_step_weights = None

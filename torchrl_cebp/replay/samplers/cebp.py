@@ -17,22 +17,8 @@ from torchrl_cebp.replay.samplers.base import (
 )
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION
 
-# Gripper workspace boxes of the released code (min xyz, max xyz), per task.
-RELEASED_WORKSPACES: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
-    "pick_place": ((1.05, 0.4, 0.419), (1.55, 1.1, float("inf"))),
-    "push": ((1.05, 0.4, 0.4), (1.55, 1.11, float("inf"))),
-    "slide": ((0.7, 0.3, 0.4), (1.95, 1.2, float("inf"))),
-    # No released code for the Franka task: no workspace mask.
-    "franka_pick_place": ((-float("inf"),) * 3, (float("inf"),) * 3),
-}
-# Paper defaults per task: (k, temperature); the released code's k per task.
-PAPER_PARAMETERS = {
-    "pick_place": (100.0, 0.01),
-    "push": (100.0, 0.01),
-    "slide": (100.0, 5.0),
-    "franka_pick_place": (100.0, 0.01),  # the Sim2Real policy: PickAndPlace's values
-}
-RELEASED_K = {"pick_place": 0.1, "push": 0.1, "slide": 0.05, "franka_pick_place": 0.1}
+# A gripper workspace box: (min xyz, max xyz). The per-task boxes are the env configs' ``gripper_workspace``.
+Workspace = tuple[tuple[float, float, float], tuple[float, float, float]]
 # The code's forms use no IS correction until this many episodes are stored.
 CODE_MIN_EPISODES_FOR_WEIGHTS = 256
 INITIAL_BETA = 0.7
@@ -43,38 +29,39 @@ class _ContactEnergySampler(EpisodePrioritySampler):
 
     def __init__(
         self,
-        task: str,
+        workspace: Workspace | None,
         touch_key: NestedKey,
         position_key: NestedKey,
         next_position_key: NestedKey,
         next_observation_key: NestedKey,
+        end_key: NestedKey,
         generator: torch.Generator | None,
     ) -> None:
-        super().__init__(generator)
-        if task not in PAPER_PARAMETERS:
-            raise ValueError(f"unknown task {task!r}; valid tasks: {sorted(PAPER_PARAMETERS)}")
-        self.task = task
+        super().__init__(generator, end_key)
         self.touch_key = touch_key
         self.position_key = position_key
         self.next_position_key = next_position_key
         self.next_observation_key = next_observation_key
-        low, high = RELEASED_WORKSPACES[task]
-        self._workspace = (torch.tensor(low, dtype=torch.float64), torch.tensor(high, dtype=torch.float64))
+        self.workspace = None if workspace is None else tuple(tuple(float(v) for v in corner) for corner in workspace)
+        if self.workspace is not None and (len(self.workspace) != 2 or any(len(c) != 3 for c in self.workspace)):
+            raise ValueError(f"workspace={workspace!r}: expected ((min x, y, z), (max x, y, z)) or None")
 
-    def _touch(self, episodes: TensorDictBase) -> torch.Tensor:
-        """Left + right touch per step, ``[n, T]``."""
-        return require_key(episodes, self.touch_key, (2,)).double().sum(-1)
+    def _touch(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Left + right touch per valid step (0 on padding), ``[n, T]``."""
+        return require_key(episodes, self.touch_key, (2,)).double().sum(-1) * valid
 
-    def _displacement(self, episodes: TensorDictBase) -> torch.Tensor:
-        """The object's displacement over each step, ``[n, T, 3]``."""
+    def _displacement(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """The object's displacement over each valid step (0 on padding), ``[n, T, 3]``."""
         positions = episode_positions(episodes, self.position_key, self.next_position_key)
-        return positions[:, 1:] - positions[:, :-1]
+        return (positions[:, 1:] - positions[:, :-1]) * valid.unsqueeze(-1)
 
     def _in_workspace(self, episodes: TensorDictBase) -> torch.Tensor:
-        """Whether the gripper is inside the task's workspace box after each step, ``[n, T]``."""
+        """Whether the gripper is inside the workspace box after each step (always, without a box), ``[n, T]``."""
         observation = require_key(episodes, self.next_observation_key, (None,))
+        if self.workspace is None:
+            return torch.ones(observation.shape[:2], dtype=torch.bool)
         gripper = observation[..., FETCH_OBSERVATION.gripper_position].double()
-        low, high = self._workspace
+        low, high = (torch.tensor(corner, dtype=torch.float64) for corner in self.workspace)
         return ((gripper >= low) & (gripper <= high)).all(-1)
 
     @staticmethod
@@ -97,15 +84,13 @@ class CEBPSampler(_ContactEnergySampler):
     Touch is only used here, to prioritise replay: the policy never sees it.
 
     Args:
-        task: ``"pick_place"``, ``"push"``, ``"slide"`` or ``"franka_pick_place"``; selects the
-            paper's defaults (k=100, T=0.01, or T=5 for slide; Franka takes PickAndPlace's).
-        scale: the sigmoid's ``k`` (default per task).
-        temperature: the sigmoid's ``T`` (default per task).
+        scale: the sigmoid's ``k`` (the paper's 100).
+        temperature: the sigmoid's ``T`` (the paper's 0.01; 5 for Slide, the env config's
+            ``cebp_temperature``).
         beta: IS exponent (default 1.0).
-        touch_key, position_key, next_position_key, next_observation_key: where
-            touch ``[T, 2]``, the object position before each step and after it
-            ``[T, 3]``, and the next observation (gripper position at
-            ``FETCH_OBSERVATION.gripper_position``) live.
+        touch_key, position_key, next_position_key: where touch ``[T, 2]`` and the object
+            position before each step and after it ``[T, 3]`` live.
+        end_key: the flag that ends an episode before its row does.
 
     Examples:
         >>> import torch
@@ -118,7 +103,7 @@ class CEBPSampler(_ContactEnergySampler):
         ...     "next": {"achieved_goal": torch.rand(4, T, 3), "touch": torch.rand(4, T, 2),
         ...              "observation": torch.rand(4, T, 25)}}, [4, T])
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * T, ndim=2),
-        ...                             sampler=CEBPSampler("push"), batch_size=8, dim_extend=0)
+        ...                             sampler=CEBPSampler(temperature=0.01), batch_size=8, dim_extend=0)
         >>> _ = rb.extend(episodes)
         >>> batch = rb.sample()
         >>> batch["priority_weight"].shape
@@ -127,30 +112,28 @@ class CEBPSampler(_ContactEnergySampler):
 
     def __init__(
         self,
-        task: str = "pick_place",
         *,
-        scale: float | None = None,
-        temperature: float | None = None,
+        scale: float = 100.0,
+        temperature: float = 0.01,
         beta: float = 1.0,
         touch_key: NestedKey = ("next", "touch"),
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
-        next_observation_key: NestedKey = ("next", "observation"),
+        end_key: NestedKey = ("next", "done"),
         generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(task, touch_key, position_key, next_position_key, next_observation_key, generator)
-        default_scale, default_temperature = PAPER_PARAMETERS[task]
+        super().__init__(None, touch_key, position_key, next_position_key, ("next", "observation"), end_key, generator)
         for name, value in (("scale", scale), ("temperature", temperature)):
-            if value is not None and not value > 0:
-                raise ValueError(f"CEBPSampler {name}={value!r}: must be a positive number (or None for the task's default)")
-        self.scale = default_scale if scale is None else float(scale)
-        self.temperature = default_temperature if temperature is None else float(temperature)
+            if not value > 0:
+                raise ValueError(f"CEBPSampler {name}={value!r}: must be a positive number")
+        self.scale = float(scale)
+        self.temperature = float(temperature)
         self.beta = float(beta)
 
-    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
-        distance = torch.linalg.vector_norm(self._displacement(episodes), dim=-1)
-        energy = torch.cumsum(self._touch(episodes) * distance, dim=1)
-        return (self.scale * torch.sigmoid(self.temperature * energy)).sum(1)
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
+        energy = torch.cumsum(self._touch(episodes, valid) * distance, dim=1)
+        return (self.scale * torch.sigmoid(self.temperature * energy) * valid).sum(1)
 
     def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
         weights = (n_episodes * probabilities) ** (-self.beta)
@@ -158,7 +141,7 @@ class CEBPSampler(_ContactEnergySampler):
 
     def __repr__(self) -> str:
         return (
-            f"CEBPSampler(task={self.task!r}, scale={self.scale}, temperature={self.temperature}, "
+            f"CEBPSampler(scale={self.scale}, temperature={self.temperature}, "
             f"beta={self.beta}, n_episodes={self.n_episodes})"
         )
 
@@ -172,9 +155,12 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
     batch maximum, all ones while fewer than 256 episodes are stored.
 
     Args:
-        task: selects ``k`` (0.1; 0.05 for slide) and the workspace box (none for the Franka task).
-        k: the sigmoid's slope (default per task).
-        touch_key, position_key, next_position_key, next_observation_key: as :class:`CEBPSampler`.
+        k: the sigmoid's slope (the code's 0.1; 0.05 for Slide: the env config's ``cebp_released_k``).
+        workspace: the gripper's box ``((min x, y, z), (max x, y, z))`` (the env config's
+            ``gripper_workspace``), or ``None`` for no mask.
+        touch_key, position_key, next_position_key, end_key: as :class:`CEBPSampler`.
+        next_observation_key: the next observation, the gripper position at
+            ``FETCH_OBSERVATION.gripper_position``.
 
     Examples:
         >>> import torch
@@ -186,29 +172,31 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
         ...     "achieved_goal": torch.zeros(2, T, 3),
         ...     "next": {"achieved_goal": torch.rand(2, T, 3), "touch": torch.rand(2, T, 2),
         ...              "observation": torch.stack([grip.expand(T, 25), -grip.expand(T, 25)])}}, [2, T])
-        >>> priority = ReleasedCEBPSampler("push").episode_priority(episodes)
+        >>> push_box = ((1.05, 0.4, 0.4), (1.55, 1.11, float("inf")))  # conf/env/push.yaml's gripper_workspace
+        >>> priority = ReleasedCEBPSampler(k=0.1, workspace=push_box).episode_priority(episodes, torch.ones(2, T, dtype=torch.bool))
         >>> bool(priority[0] > 1.0), bool(priority[1] < 1e-6)  # the second gripper never entered the box
         (True, True)
     """
 
     def __init__(
         self,
-        task: str = "pick_place",
         *,
-        k: float | None = None,
+        k: float = 0.1,
+        workspace: Workspace | None = None,
         touch_key: NestedKey = ("next", "touch"),
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
         next_observation_key: NestedKey = ("next", "observation"),
+        end_key: NestedKey = ("next", "done"),
         generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(task, touch_key, position_key, next_position_key, next_observation_key, generator)
-        self.k = RELEASED_K[task] if k is None else float(k)
+        super().__init__(workspace, touch_key, position_key, next_position_key, next_observation_key, end_key, generator)
+        self.k = float(k)
 
-    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
-        displacement = self._displacement(episodes)
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        displacement = self._displacement(episodes, valid)
         inside = self._in_workspace(episodes).unsqueeze(-1)
-        energy = torch.cumsum(displacement * self._touch(episodes).unsqueeze(-1), dim=1) * inside
+        energy = torch.cumsum(displacement * self._touch(episodes, valid).unsqueeze(-1), dim=1) * inside
         x = energy.sum(-1) * torch.linalg.vector_norm(displacement, dim=-1)
         centred = 100.0 * torch.sigmoid(self.k * x) - 50.0
         return centred.abs().sum(1) + FLOAT32_EPS
@@ -217,7 +205,7 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
         return self._code_weights(probabilities, n_episodes, beta=1.0)
 
     def __repr__(self) -> str:
-        return f"ReleasedCEBPSampler(task={self.task!r}, k={self.k}, n_episodes={self.n_episodes})"
+        return f"ReleasedCEBPSampler(k={self.k}, workspace={self.workspace}, n_episodes={self.n_episodes})"
 
 
 class InitialCEBPSampler(_ContactEnergySampler):
@@ -229,9 +217,9 @@ class InitialCEBPSampler(_ContactEnergySampler):
     share the priority ``eps``, so the few with contact dominate the draw.
 
     Args:
-        task: selects the workspace box (none for the Franka task).
         beta: IS exponent (the commit's 0.7).
-        touch_key, position_key, next_position_key, next_observation_key: as :class:`CEBPSampler`.
+        workspace, touch_key, position_key, next_position_key, next_observation_key, end_key: as
+            :class:`ReleasedCEBPSampler`.
 
     Examples:
         >>> import torch
@@ -245,7 +233,8 @@ class InitialCEBPSampler(_ContactEnergySampler):
         ...     "next": {"achieved_goal": torch.rand(2, T, 3), "touch": touch,
         ...              "observation": torch.rand(2, T, 25) + torch.tensor([1.2, 0.6, 0.4] + [0.0] * 22)}}, [2, T])
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * T, ndim=2),
-        ...                             sampler=InitialCEBPSampler("push"), batch_size=8, dim_extend=0)
+        ...                             sampler=InitialCEBPSampler(workspace=((1.05, 0.4, 0.4), (1.55, 1.11, float("inf")))),
+        ...                             batch_size=8, dim_extend=0)
         >>> _ = rb.extend(episodes)
         >>> rb.sample()["index"][:, 0].tolist()
         [1, 1, 1, 1, 1, 1, 1, 1]
@@ -253,25 +242,26 @@ class InitialCEBPSampler(_ContactEnergySampler):
 
     def __init__(
         self,
-        task: str = "pick_place",
         *,
         beta: float = INITIAL_BETA,
+        workspace: Workspace | None = None,
         touch_key: NestedKey = ("next", "touch"),
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
         next_observation_key: NestedKey = ("next", "observation"),
+        end_key: NestedKey = ("next", "done"),
         generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(task, touch_key, position_key, next_position_key, next_observation_key, generator)
+        super().__init__(workspace, touch_key, position_key, next_position_key, next_observation_key, end_key, generator)
         self.beta = float(beta)
 
-    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
-        distance = torch.linalg.vector_norm(self._displacement(episodes), dim=-1)
-        touch = self._touch(episodes) * self._in_workspace(episodes)
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
+        touch = self._touch(episodes, valid) * self._in_workspace(episodes)
         return (touch * distance).abs().sum(1) + FLOAT32_EPS
 
     def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
         return self._code_weights(probabilities, n_episodes, beta=self.beta)
 
     def __repr__(self) -> str:
-        return f"InitialCEBPSampler(task={self.task!r}, beta={self.beta}, n_episodes={self.n_episodes})"
+        return f"InitialCEBPSampler(beta={self.beta}, workspace={self.workspace}, n_episodes={self.n_episodes})"

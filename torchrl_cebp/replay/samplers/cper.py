@@ -18,6 +18,7 @@ class CPERSampler(EpisodePrioritySampler):
         threshold: cumulative touch (left + right) above which a step counts as contact-rich.
         lam: weight of a contact-rich step (``lambda`` in the paper).
         touch_key: where the per-step touch ``[T, 2]`` lives.
+        end_key: the flag that ends an episode before its row does.
 
     Examples:
         >>> import torch
@@ -38,20 +39,21 @@ class CPERSampler(EpisodePrioritySampler):
         lam: float = 10.0,
         *,
         touch_key: NestedKey = ("next", "touch"),
+        end_key: NestedKey = ("next", "done"),
         generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(generator)
+        super().__init__(generator, end_key)
         self.threshold = float(threshold)
         self.lam = float(lam)
         self.touch_key = touch_key
 
-    def step_weights(self, episodes: TensorDictBase) -> torch.Tensor:
+    def step_weights(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         touch = require_key(episodes, self.touch_key, (2,)).double().sum(-1)
         rich = torch.cumsum(touch, dim=1) > self.threshold
-        return torch.where(rich, self.lam, 1.0)
+        return torch.where(rich, self.lam, 1.0) * valid
 
-    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
-        return self.step_weights(episodes).sum(1)
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        return self.step_weights(episodes, valid).sum(1)
 
     def __repr__(self) -> str:
         return f"CPERSampler(threshold={self.threshold}, lam={self.lam}, n_episodes={self.n_episodes})"

@@ -25,6 +25,7 @@ class EBPSampler(EpisodePrioritySampler):
         temperature: 1 by default.
         w_potential, w_kinetic: weights of the two energy terms.
         position_key, next_position_key: object position before / after each step.
+        end_key: the flag that ends an episode before its row does.
 
     Examples:
         >>> import torch
@@ -49,9 +50,10 @@ class EBPSampler(EpisodePrioritySampler):
         w_kinetic: float = 1.0,
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
+        end_key: NestedKey = ("next", "done"),
         generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(generator)
+        super().__init__(generator, end_key)
         self.clip_energy = float(clip_energy)
         self.temperature = float(temperature)
         self.w_potential = float(w_potential)
@@ -59,18 +61,18 @@ class EBPSampler(EpisodePrioritySampler):
         self.position_key = position_key
         self.next_position_key = next_position_key
 
-    def trajectory_energy(self, episodes: TensorDictBase) -> torch.Tensor:
-        """The clipped, summed energy increases of each episode's object (shape ``[n]``)."""
+    def trajectory_energy(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """The clipped, summed energy increases over each episode's valid steps (shape ``[n]``)."""
         positions = episode_positions(episodes, self.position_key, self.next_position_key)
         height = positions[:, 1:, 2] - positions[:, :1, 2]
         velocity = (positions[:, 1:] - positions[:, :-1]) / STEP_SECONDS
         energy = self.w_potential * GRAVITY * MASS * height + self.w_kinetic * 0.5 * MASS * velocity.pow(2).sum(-1)
         increase = torch.cat([energy[:, :1], energy.diff(dim=1)], dim=1)
-        return increase.clamp(0.0, self.clip_energy).sum(1)
+        return (increase.clamp(0.0, self.clip_energy) * valid).sum(1)
 
-    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         # eps keeps a buffer of motionless episodes drawable (uniformly) instead of all-zero.
-        return self.trajectory_energy(episodes).pow(1.0 / (self.temperature + 0.01)) + FLOAT32_EPS
+        return self.trajectory_energy(episodes, valid).pow(1.0 / (self.temperature + 0.01)) + FLOAT32_EPS
 
     def __repr__(self) -> str:
         return (

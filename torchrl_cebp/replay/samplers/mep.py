@@ -10,7 +10,13 @@ from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.data.replay_buffers.storages import Storage
 
+from torchrl_cebp.replay.episodes import valid_steps
 from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, episode_positions
+
+# The fitted attributes of a BayesianGaussianMixture (weight_concentration_prior_type="dirichlet_distribution")
+# that score_samples reads: sklearn's public fitted state, saved by name.
+MIXTURE_STATE = ("weight_concentration_", "mean_precision_", "means_", "degrees_of_freedom_",
+                 "covariances_", "precisions_cholesky_")
 
 
 class MEPSampler(EpisodePrioritySampler):
@@ -66,9 +72,10 @@ class MEPSampler(EpisodePrioritySampler):
         seed: int = 0,
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
+        end_key: NestedKey = ("next", "done"),
         generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(generator)
+        super().__init__(generator, end_key)
         self.n_components = int(n_components)
         self.temperature = float(temperature)
         self.max_fit_episodes = int(max_fit_episodes)
@@ -91,8 +98,11 @@ class MEPSampler(EpisodePrioritySampler):
             random_state=self.seed + self._n_refits,
         )
 
-    def _trajectories(self, episodes: TensorDictBase) -> np.ndarray:
+    def _trajectories(self, episodes: TensorDictBase, valid: torch.Tensor) -> np.ndarray:
+        # A trajectory that ended early keeps its last position: the padding adds no density of its own.
         positions = episode_positions(episodes, self.position_key, self.next_position_key)
+        state = torch.minimum(torch.arange(positions.shape[1]), valid.sum(1, keepdim=True))
+        positions = positions.gather(1, state.unsqueeze(-1).expand_as(positions))
         return positions.flatten(1).numpy()
 
     def _scores(self, trajectories: np.ndarray) -> torch.Tensor:
@@ -101,10 +111,10 @@ class MEPSampler(EpisodePrioritySampler):
     def _priority_from_rank(self, rank: torch.Tensor) -> torch.Tensor:
         return rank.double().pow(1.0 / (self.temperature + 0.01))
 
-    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         if self._mixture is None:
             return torch.ones(episodes.shape[0], dtype=torch.float64)
-        scores = self._scores(self._trajectories(episodes))
+        scores = self._scores(self._trajectories(episodes, valid))
         rank = torch.searchsorted(self._reference_scores, scores) + 1
         return self._priority_from_rank(rank)
 
@@ -113,7 +123,7 @@ class MEPSampler(EpisodePrioritySampler):
         if self.n_episodes < self.n_components:
             return
         rows = torch.arange(self.n_episodes)
-        trajectories = self._trajectories(storage[rows])
+        trajectories = self._trajectories(storage.get(rows), valid_steps(self._lengths[rows], storage.shape[1]))
         fit_rows = np.random.default_rng(self.seed + self._n_refits).permutation(len(rows))
         fit_data = trajectories[fit_rows[: self.max_fit_episodes]]
         prior = np.cov(fit_data.T) + self.reg_covar * np.eye(fit_data.shape[1])
@@ -128,20 +138,20 @@ class MEPSampler(EpisodePrioritySampler):
         state["reference_scores"] = self._reference_scores.clone()
         state["n_refits"] = self._n_refits
         if self._mixture is not None:
-            for i, array in enumerate(self._mixture._get_parameters()):
-                state[f"mixture_{i}"] = torch.as_tensor(np.asarray(array))
+            for name in MIXTURE_STATE:
+                state[f"mixture_{name}"] = torch.as_tensor(np.asarray(getattr(self._mixture, name)))
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         super().load_state_dict(state_dict)
         self._reference_scores = state_dict["reference_scores"].clone()
         self._n_refits = int(state_dict["n_refits"])
-        parameters = [state_dict[key].numpy() for key in sorted(k for k in state_dict if k.startswith("mixture_"))]
         self._mixture = None
-        if parameters:
+        if f"mixture_{MIXTURE_STATE[0]}" in state_dict:
             self._mixture = self._new_mixture()
-            self._mixture._set_parameters(tuple(parameters))
-            self._mixture.n_features_in_ = parameters[2].shape[1]
+            for name in MIXTURE_STATE:
+                setattr(self._mixture, name, state_dict[f"mixture_{name}"].numpy())
+            self._mixture.n_features_in_ = self._mixture.means_.shape[1]
 
     def __repr__(self) -> str:
         return (

@@ -5,19 +5,27 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from tensordict.utils import NestedKey
 from torchrl.data.replay_buffers.samplers import PrioritizedSampler
+from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl.data.replay_buffers.storages import Storage
+
+from torchrl_cebp.replay import _upstream
+from torchrl_cebp.replay.episodes import episode_lengths, valid_steps
+from torchrl_cebp.replay.samplers.base import stored_rows
 
 
 class PERSampler(PrioritizedSampler):
     """TorchRL's segment-tree :class:`~torchrl.data.PrioritizedSampler` with beta annealed 0.4 -> 1.
 
     Priorities are per transition, ``(|TD error| + eps) ^ alpha``; new
-    transitions enter at the highest priority seen. Feed priorities back after
+    transitions enter at the highest priority seen, and the padding steps of
+    episodes that ended early at probability 0. Feed priorities back after
     each update with ``rb.update_tensordict_priority(batch)`` (the batch holds
     ``"td_error"`` once a TorchRL loss ran on it) or ``rb.update_priority``.
     Beta grows linearly from ``beta`` to ``beta_end`` over ``beta_anneal_draws``
-    calls to :meth:`sample`, as in baselines' PER over training.
+    draws, as in baselines' PER over training, through the TorchRL scheduler
+    :meth:`beta_scheduler` returns: step it once per draw.
 
     Args:
         capacity: storage capacity in transitions (the buffer's, e.g. 1e6).
@@ -26,6 +34,7 @@ class PERSampler(PrioritizedSampler):
         beta_end: final IS exponent (1.0).
         beta_anneal_draws: number of draws over which beta is annealed.
         eps: added to |TD error| (1e-6 as in baselines).
+        end_key: the flag that ends an episode before its row does.
 
     Examples:
         >>> import torch
@@ -40,6 +49,10 @@ class PERSampler(PrioritizedSampler):
         >>> batch = rb.sample()
         >>> _ = batch.set("td_error", torch.rand(4))
         >>> rb.update_tensordict_priority(batch)
+        >>> scheduler = rb.sampler.beta_scheduler()
+        >>> scheduler.step()
+        >>> round(float(rb.sampler.beta), 6)  # one of 100,000 steps from 0.4 to 1
+        0.400006
     """
 
     def __init__(
@@ -51,46 +64,36 @@ class PERSampler(PrioritizedSampler):
         beta_anneal_draws: int = 100_000,
         eps: float = 1e-6,
         *,
+        end_key: NestedKey = ("next", "done"),
         generator: torch.Generator | None = None,
     ) -> None:
         super().__init__(int(capacity), alpha=alpha, beta=beta, eps=eps)
-        self.beta_start = float(beta)
         self.beta_end = float(beta_end)
         self.beta_anneal_draws = int(beta_anneal_draws)
-        self.draws = 0
+        self.end_key = end_key
         self._rng = generator
 
-    def sample(self, storage: Storage, batch_size: int) -> tuple[Any, dict]:
-        progress = min(1.0, self.draws / max(1, self.beta_anneal_draws))
-        self.beta = self.beta_start + progress * (self.beta_end - self.beta_start)
-        self.draws += 1
-        return super().sample(storage, batch_size)
+    def beta_scheduler(self) -> LinearScheduler:
+        """TorchRL's linear scheduler taking beta from its current value to ``beta_end`` in ``beta_anneal_draws`` steps."""
+        return LinearScheduler(self, "beta", final_value=self.beta_end, num_steps=self.beta_anneal_draws)
+
+    def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
+        super().mark_update(index, storage=storage)
+        if storage is None or getattr(storage, "ndim", 1) != 2:
+            return
+        rows = stored_rows(index)
+        row_length = storage.shape[1]
+        padding = ~valid_steps(episode_lengths(storage.get(rows), self.end_key), row_length)
+        if padding.any():
+            rows_of, steps_of = padding.nonzero(as_tuple=True)
+            _upstream.exclude_from_draws(self, rows[rows_of] * row_length + steps_of)
 
     def state_dict(self) -> dict[str, Any]:
         """Plain tensors and numbers only (TorchRL's own holds C++ trees, which ``weights_only`` loads refuse)."""
-        every = torch.arange(self._max_capacity)
-        max_value, max_index = self._max_priority
-        return {
-            "alpha": self._alpha,
-            "beta": self._beta,
-            "eps": self._eps,
-            "max_priority": None if max_value is None else torch.as_tensor(max_value),
-            "max_priority_index": None if max_index is None else torch.as_tensor(max_index),
-            "sum_tree": torch.as_tensor(self._sum_tree[every]),
-            "min_tree": torch.as_tensor(self._min_tree[every]),
-            "draws": self.draws,
-        }
+        return _upstream.prioritized_state(self)
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
-        self._alpha = state_dict["alpha"]
-        self._beta = state_dict["beta"]
-        self._eps = state_dict["eps"]
-        self._init()
-        every = torch.arange(self._max_capacity)
-        self._sum_tree[every] = state_dict["sum_tree"]
-        self._min_tree[every] = state_dict["min_tree"]
-        self._max_priority = (state_dict["max_priority"], state_dict["max_priority_index"])
-        self.draws = int(state_dict["draws"])
+        _upstream.load_prioritized_state(self, state_dict)
 
     def dumps(self, path: str | Path) -> None:
         path = Path(path)
@@ -103,5 +106,5 @@ class PERSampler(PrioritizedSampler):
     def __repr__(self) -> str:
         return (
             f"PERSampler(alpha={self.alpha}, beta={self.beta:.3f} -> {self.beta_end} over "
-            f"{self.beta_anneal_draws} draws, draws={self.draws})"
+            f"{self.beta_anneal_draws} draws)"
         )

@@ -10,6 +10,11 @@ from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler
 class UniformEpisodeSampler(EpisodePrioritySampler):
     """Uniform episode, then uniform step: what HER (Andrychowicz et al.) replays.
 
+    With episodes of one length this is the distribution TorchRL's
+    :class:`~torchrl.data.RandomSampler` draws over an ``ndim=2`` storage (every
+    stored transition equally likely). It stays because episodes may end early:
+    ``RandomSampler`` would draw their padding steps, this never does.
+
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
@@ -23,7 +28,7 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
         torch.Size([4, 2])
     """
 
-    def episode_priority(self, episodes: TensorDictBase) -> torch.Tensor:
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         return torch.ones(episodes.shape[0], dtype=torch.float64)
 
     def draw_episodes(self, batch_size: int) -> torch.Tensor:

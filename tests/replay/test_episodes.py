@@ -1,0 +1,131 @@
+"""Episodes that end before their row: no padding drawn, no goal past the end, priorities blind to the padding."""
+import numpy as np
+import pytest
+import torch
+from torchrl.envs import Transform, TransformedEnv
+
+from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
+from tests.replay.test_her import decode, labelled_episodes
+from torchrl_cebp.envs import make_env
+from torchrl_cebp.envs.layout import FETCH_OBSERVATION
+from torchrl_cebp.replay import HindsightRelabel, episode_lengths, make_replay_buffer
+from torchrl_cebp.samplers import (
+    CEBPSampler,
+    CPERSampler,
+    EBPSampler,
+    InitialCEBPSampler,
+    MEPSampler,
+    PERSampler,
+    ReleasedCEBPSampler,
+    UniformEpisodeSampler,
+)
+
+SAMPLERS = {
+    "uniform": lambda capacity: UniformEpisodeSampler(),
+    "cebp": lambda capacity: CEBPSampler(),
+    "cebp_released": lambda capacity: ReleasedCEBPSampler(workspace=PUSH_WORKSPACE),
+    "cebp_initial": lambda capacity: InitialCEBPSampler(workspace=PUSH_WORKSPACE),
+    "cper": lambda capacity: CPERSampler(),
+    "ebp": lambda capacity: EBPSampler(),
+    "mep": lambda capacity: MEPSampler(n_components=2),
+    "per": PERSampler,
+}
+
+
+def ending_early(n, lengths, first_id=0, padding="garbage"):
+    """Labelled episodes whose ``("next", "done")`` comes at ``lengths``; after it, ``padding``."""
+    episodes = labelled_episodes(n, first_id=first_id)
+    episodes["next", "done"][:] = False
+    for row, length in enumerate(lengths):
+        episodes["next", "done"][row, length - 1] = True
+        if padding == "garbage":  # what an auto-reset env leaves there: another episode, touching hard
+            tail = slice(length, T)
+            episodes["next", "touch"][row, tail] = 50.0
+            episodes["next", "achieved_goal"][row, tail] = torch.rand(T - length, 3) + 5.0
+            episodes["next", "observation"][row, tail, :3] = torch.tensor([1.3, 0.75, 0.5])
+    return episodes
+
+
+@pytest.mark.parametrize("name", sorted(SAMPLERS))
+def test_no_padding_drawn_and_no_goal_past_the_end_with_wrap_around(name):
+    sampler = SAMPLERS[name](6 * T)
+    rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward, future_p=1.0), capacity=6 * T, batch_size=4096)
+    rb.extend(ending_early(4, [50, 7, 30, 1]))
+    rb.extend(ending_early(4, [12, 50, 3, 40], first_id=4))  # rows 0 and 1 overwritten by shorter/longer episodes
+    lengths_by_episode = {0: 50, 1: 7, 2: 30, 3: 1, 4: 12, 5: 50, 6: 3, 7: 40}
+    if isinstance(sampler, MEPSampler):
+        sampler.refit(rb.storage)
+    for _ in range(3):
+        batch = rb.sample()
+        episode, state = decode(batch["desired_goal"])
+        steps = batch["index"][:, 1]
+        length = torch.tensor([lengths_by_episode[e] for e in episode.tolist()])
+        assert (steps < length).all(), "a padding step was drawn"
+        assert (state >= steps + 1).all() and (state <= length).all(), "a goal came from past the episode's end"
+        assert set(episode.tolist()) == {2, 3, 4, 5, 6, 7}
+        # the one-step episode still gets drawn, and its only goal is its final state
+        assert (state[episode == 3] == 1).all()
+
+
+@pytest.mark.parametrize("name", ["cebp", "cebp_released", "cebp_initial", "cper", "ebp", "mep"])
+def test_priorities_ignore_the_padding(name):
+    lengths = [50, 20, 35, 10, 44, 27]
+    def priorities(padding):
+        rb = make_replay_buffer(SAMPLERS[name](10 * T), HindsightRelabel(sparse_reward), capacity=10 * T)
+        episodes = ending_early(6, lengths, padding=padding)
+        episodes["next", "touch"][:, :, :] += torch.linspace(0, 1, 6)[:, None, None]  # episodes differ
+        rb.extend(episodes)
+        if isinstance(rb.sampler, MEPSampler):
+            rb.sampler.refit(rb.storage)
+        return rb.sampler.probabilities(torch.arange(6))
+
+    clean, garbage = priorities("none"), priorities("garbage")
+    torch.testing.assert_close(garbage, clean)
+
+
+def test_per_gives_padding_probability_zero():
+    rb = make_replay_buffer(PERSampler(6 * T), HindsightRelabel(sparse_reward), capacity=6 * T, batch_size=8192)
+    rb.extend(ending_early(3, [5, 50, 2]))
+    index = rb.sample()["index"]
+    length = torch.tensor([5, 50, 2])[index[:, 0]]
+    assert (index[:, 1] < length).all()
+
+
+class EndAboveHeight(Transform):
+    """Ends an episode once the gripper rises above ``height``: a real env that terminates early."""
+
+    def __init__(self, height: float) -> None:
+        super().__init__()
+        self.height = height
+
+    def _step(self, tensordict, next_tensordict):
+        gripper = next_tensordict["observation"][..., FETCH_OBSERVATION.gripper_position]
+        high = gripper[..., 2:3] > self.height
+        next_tensordict.set("terminated", next_tensordict["terminated"] | high)
+        next_tensordict.set("done", next_tensordict["done"] | high)
+        return next_tensordict
+
+
+def test_a_fetch_env_that_ends_early_is_replayed_within_its_episodes():
+    env = TransformedEnv(make_env("push", num_envs=8), EndAboveHeight(0.5))
+    env.set_seed(0)
+    episodes = env.rollout(T, break_when_any_done=False)  # ended envs auto-reset: the rest of the row is padding
+    env.close()
+    lengths = episode_lengths(episodes)
+    assert (lengths < T).any() and (lengths == T).any()
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(env.base_env.compute_reward, future_p=1.0),
+                            capacity=20 * T, batch_size=4096)
+    rb.extend(episodes)
+    batch = rb.sample()
+    rows, steps = batch["index"].unbind(-1)
+    assert (steps < lengths[rows]).all()
+    # each relabelled goal is the achieved goal of a next-state in [t, L - 1] of its own episode
+    achieved = episodes["next", "achieved_goal"][rows]  # [B, T, 3]
+    match = (achieved == batch["desired_goal"][:, None]).all(-1)  # [B, T]
+    j = torch.arange(T)
+    allowed = (j >= steps[:, None]) & (j < lengths[rows][:, None])
+    assert (match & allowed).any(-1).all()
+    np.testing.assert_array_equal(
+        batch["next", "reward"].numpy(),
+        env.base_env.compute_reward(batch["next", "achieved_goal"], batch["desired_goal"]).numpy(),
+    )

@@ -1,0 +1,82 @@
+"""Pins every private TorchRL / tensordict attribute the replay package reaches (torchrl_cebp/replay/_upstream.py).
+
+Each test fails, by name, if an upgrade moves or changes one of them.
+"""
+import numpy as np
+import torch
+from tensordict import TensorDict
+from torchrl.data import LazyTensorStorage, PrioritizedSampler, TensorDictReplayBuffer
+
+from tests.replay.conftest import T, make_episodes
+from torchrl_cebp.replay import _upstream
+
+
+def test_the_buffer_generator_reaches_the_storage():
+    generator = torch.Generator().manual_seed(0)
+    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * T, ndim=2), dim_extend=0, batch_size=4,
+                                generator=generator)
+    rb.extend(make_episodes(2))
+    assert _upstream.buffer_generator(rb.storage) is generator
+    other = torch.Generator()
+    rb.set_rng(other)
+    assert _upstream.buffer_generator(rb.storage) is other
+
+
+def test_the_stored_tensordict_is_what_the_storage_reads_and_writes():
+    storage = LazyTensorStorage(10 * T, ndim=2)
+    storage.set(torch.arange(2), make_episodes(2))
+    stored = _upstream.stored_tensordict(storage)
+    assert stored.shape == torch.Size([10, T])
+    assert stored["action"].data_ptr() == storage.get(slice(None))["action"].data_ptr()
+    replacement = stored.clone()
+    replacement["action"].fill_(7.0)
+    _upstream.replace_stored_tensordict(storage, replacement)
+    assert (storage.get((torch.tensor([1]), torch.tensor([3])))["action"] == 7.0).all()
+    storage.set(torch.tensor([0]), make_episodes(1, seed=5))
+    assert torch.equal(replacement["action"][0], make_episodes(1, seed=5)["action"][0])
+
+
+def test_an_unchecked_tensordict_equals_a_checked_one():
+    source = {"a": torch.ones(4, 2), "b": torch.zeros(4)}
+    built = _upstream.unchecked_tensordict(source, torch.Size([4]), None)
+    assert (built == TensorDict(source, [4])).all()
+
+
+def test_a_prioritized_sampler_round_trips_through_plain_tensors():
+    def filled():
+        sampler = PrioritizedSampler(10 * T, alpha=0.7, beta=0.5)
+        rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * T, ndim=2), sampler=sampler, dim_extend=0,
+                                    batch_size=64, priority_key="td_error")
+        rb.extend(make_episodes(3))
+        batch = rb.sample()
+        batch.set("td_error", torch.linspace(0.0, 3.0, 64))
+        rb.update_tensordict_priority(batch)
+        return rb
+
+    rb = filled()
+    state = _upstream.prioritized_state(rb.sampler)
+    assert all(isinstance(v, (torch.Tensor, float)) for v in state.values() if v is not None)
+    copy = PrioritizedSampler(10 * T, alpha=0.1, beta=0.1)
+    _upstream.load_prioritized_state(copy, state)
+    assert (copy.alpha, copy.beta) == (0.7, 0.5)
+    every = torch.arange(10 * T)
+    assert torch.equal(torch.as_tensor(copy._sum_tree[every]), torch.as_tensor(rb.sampler._sum_tree[every]))
+    storage = rb.storage
+    np.random.seed(0)  # TorchRL's prioritized draw uses numpy's global RNG when the buffer has no generator
+    expected = rb.sampler.sample(storage, 256)
+    np.random.seed(0)
+    got = copy.sample(storage, 256)
+    assert all(torch.equal(a, b) for a, b in zip(expected[0], got[0]))  # (rows, steps)
+    assert torch.equal(expected[1]["priority_weight"], got[1]["priority_weight"])
+
+
+def test_excluded_transitions_are_never_drawn():
+    sampler = PrioritizedSampler(4 * T, alpha=0.6, beta=0.4)
+    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(4 * T, ndim=2), sampler=sampler, dim_extend=0,
+                                batch_size=20_000)
+    rb.extend(make_episodes(2))
+    excluded = torch.arange(10, 2 * T)  # all of row 0 past step 10, and all of row 1
+    _upstream.exclude_from_draws(sampler, excluded)
+    flat = rb.sample()["index"]
+    flat = flat[:, 0] * T + flat[:, 1]
+    assert (flat < 10).all()

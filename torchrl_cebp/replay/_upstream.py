@@ -1,0 +1,88 @@
+"""Every private attribute of TorchRL or tensordict the replay package reaches, in one place.
+
+Each use below has no public equivalent in TorchRL 0.14.1 / tensordict 0.14.3 (pinned in
+pyproject.toml). ``tests/replay/test_upstream.py`` pins each one, so an upstream change fails
+there, by name, before it can change a draw silently.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data.replay_buffers.samplers import PrioritizedSampler
+from torchrl.data.replay_buffers.storages import Storage, TensorStorage
+
+
+def buffer_generator(storage: Storage) -> torch.Generator | None:
+    """The generator a buffer was given (``generator=`` or ``set_rng``).
+
+    ``ReplayBuffer.set_rng`` hands it to its storage, sampler and writer as ``_rng``, with no
+    public getter; a sample unit only sees the storage.
+    """
+    return getattr(storage, "_rng", None)
+
+
+def unchecked_tensordict(source: dict, batch_size: torch.Size, device: torch.device | None) -> TensorDict:
+    """A TensorDict over entries already known to fit ``batch_size``, without the per-entry checks.
+
+    ``TensorDict(...)`` validates every leaf; the episode storage's fast read builds one per draw
+    from views it laid out itself, and the checks cost as much as the read.
+    """
+    return TensorDict._new_unsafe(source=source, batch_size=batch_size, device=device)
+
+
+def prioritized_state(sampler: PrioritizedSampler) -> dict[str, Any]:
+    """A ``PrioritizedSampler``'s state as plain tensors and numbers.
+
+    Its own ``state_dict`` holds the C++ segment trees, which ``torch.load(weights_only=True)``
+    refuses; the trees' values and the running maximum are only reachable privately.
+    """
+    every = torch.arange(sampler._max_capacity)
+    max_value, max_index = sampler._max_priority
+    return {
+        # Plain floats: a TorchRL scheduler leaves numpy scalars, which weights_only loads refuse.
+        "alpha": float(sampler.alpha),
+        "beta": float(sampler.beta),
+        "eps": float(sampler._eps),
+        "max_priority": None if max_value is None else torch.as_tensor(max_value),
+        "max_priority_index": None if max_index is None else torch.as_tensor(max_index),
+        "sum_tree": torch.as_tensor(sampler._sum_tree[every]),
+        "min_tree": torch.as_tensor(sampler._min_tree[every]),
+    }
+
+
+def load_prioritized_state(sampler: PrioritizedSampler, state: dict[str, Any]) -> None:
+    """Restores what :func:`prioritized_state` saved."""
+    sampler._alpha = state["alpha"]
+    sampler.beta = state["beta"]
+    sampler._eps = state["eps"]
+    sampler._init()
+    every = torch.arange(sampler._max_capacity)
+    sampler._sum_tree[every] = state["sum_tree"]
+    sampler._min_tree[every] = state["min_tree"]
+    sampler._max_priority = (state["max_priority"], state["max_priority_index"])
+
+
+def exclude_from_draws(sampler: PrioritizedSampler, index: torch.Tensor) -> None:
+    """Gives flat transitions ``index`` probability exactly 0.
+
+    ``update_priority`` stores ``(p + eps) ** alpha``, which is never 0; padding steps of
+    variable-length episodes must never be drawn.
+    """
+    sampler._sum_tree[index] = torch.zeros(index.shape)
+    sampler._min_tree[index] = torch.full(index.shape, float("inf"))
+
+
+def stored_tensordict(storage: TensorStorage) -> TensorDictBase:
+    """The tensordict a ``TensorStorage`` keeps its rows in (``storage._storage``).
+
+    :class:`~torchrl_cebp.replay.EpisodeStorage` re-lays it out once, one block per dtype, so that
+    a draw reads one contiguous run of memory per transition; TorchRL offers no hook to choose it.
+    """
+    return storage._storage
+
+
+def replace_stored_tensordict(storage: TensorStorage, data: TensorDictBase) -> None:
+    """Makes ``data`` (same keys, shapes and dtypes) the tensordict the storage reads and writes."""
+    storage._storage = data
