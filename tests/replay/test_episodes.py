@@ -131,3 +131,21 @@ def test_a_fetch_env_that_ends_early_is_replayed_within_its_episodes():
         batch["next", "reward"].numpy(),
         env.base_env.compute_reward(batch["next", "achieved_goal"], batch["desired_goal"]).numpy(),
     )
+
+
+def test_valid_lengths_survive_a_save_and_load(tmp_path):
+    def buffer():
+        return make_replay_buffer(UniformEpisodeSampler(), HindsightRelabel(sparse_reward, future_p=1.0),
+                                  capacity=6 * T, batch_size=4096)
+
+    rb = buffer()
+    rb.extend(ending_early(3, [9, 50, 4]))
+    rb.dumps(tmp_path)
+    restored = buffer()
+    restored.loads(tmp_path)
+    restored.extend(ending_early(1, [20], first_id=3))  # a write after the restore keeps the restored lengths
+    batch = restored.sample()
+    episode, state = decode(batch["desired_goal"])
+    length = torch.tensor([9, 50, 4, 20])[episode]
+    assert (batch["index"][:, 1] < length).all() and (state <= length).all()
+    assert torch.equal(restored.storage.valid_lengths(torch.arange(4)), torch.tensor([9, 50, 4, 20]))

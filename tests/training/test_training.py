@@ -226,7 +226,7 @@ def test_normaliser_sees_goals_achieved_later_in_the_episode():
         [n, T],
     )
     reward = lambda ag, g: torch.zeros(*ag.shape[:-1], 1)  # noqa: E731
-    feed = RelabelledTransitions(HindsightRelabel(reward, future_p=1.0), n, T)
+    feed = RelabelledTransitions(HindsightRelabel(reward, future_p=1.0))
     goals = feed(episodes)["desired_goal"][:, 0].reshape(n, T)
     step_ids = torch.arange(n * T, dtype=torch.float32).reshape(n, T)
     # goal of (e, t) is the achieved goal of a later next-state of the same episode

@@ -14,6 +14,7 @@ from torchrl.data.replay_buffers.storages import Storage
 from torchrl_cebp.replay import _upstream
 from torchrl_cebp.replay.episodes import episode_lengths, next_key
 from torchrl_cebp.replay.samplers.base import split_index
+from torchrl_cebp.replay.storage import _EpisodeRows
 
 RewardFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 STRATEGIES = ("future", "final", "episode")
@@ -131,14 +132,17 @@ class HindsightRelabel(SampleUnit):
         rows: torch.Tensor,
         steps: torch.Tensor,
         generator: torch.Generator | None = None,
+        lengths: torch.Tensor | None = None,
     ) -> dict[NestedKey, torch.Tensor]:
         """The relabelled goal, next goal, reward and coin of transitions ``(rows, steps)`` of ``[N, T]`` episodes.
 
         The one relabelling both the replay draw and the trainer's normaliser feed use.
+        ``lengths`` are the valid lengths of ``rows``, read from the ``end_key`` flags when omitted.
         """
         generator = self.generator if generator is None else generator
         episode_steps = episodes.shape[1]
-        lengths = episode_lengths(episodes, self.end_key, rows)
+        if lengths is None:
+            lengths = episode_lengths(episodes, self.end_key, rows)
         # Flat views + index_select: much cheaper than 2-D advanced indexing.
         next_achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1)
         stored_goal = episodes.get(self.goal_key).flatten(0, 1)
@@ -172,8 +176,11 @@ class HindsightRelabel(SampleUnit):
             )
         rows, steps = split_index(index)
         generator = self.generator if self.generator is not None else _upstream.buffer_generator(storage)
+        lengths = None
+        if isinstance(storage, _EpisodeRows) and storage.end_key == self.end_key:
+            lengths = storage.valid_lengths(rows)
         # A slice of a tensor storage is a view: no copy of the buffer.
-        entries = self.relabel(storage.get(slice(None)), rows, steps, generator)
+        entries = self.relabel(storage.get(slice(None)), rows, steps, generator, lengths)
         if self.relabelled_key is not None:
             info[self.relabelled_key] = entries.pop(self.relabelled_key)
         self._pending.entries = entries

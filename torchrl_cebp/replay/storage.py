@@ -10,10 +10,24 @@ from tensordict.utils import NestedKey
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage
 
 from torchrl_cebp.replay import _upstream
+from torchrl_cebp.replay.episodes import episode_lengths
 
 
 class _EpisodeRows:
-    """Writes must be whole episodes of one fixed length (the storage's second dimension)."""
+    """Writes must be whole episodes of one fixed length (the storage's second dimension).
+
+    Each row's valid length (up to its first ``end_key`` flag) is kept on write, so that HER
+    reads it per draw instead of scanning the flags.
+    """
+
+    end_key: NestedKey = ("next", "done")
+    _lengths: torch.Tensor | None = None
+
+    def valid_lengths(self, rows: torch.Tensor) -> torch.Tensor:
+        """Valid steps of the episodes stored in ``rows``."""
+        if self._lengths is None:  # restored from a checkpoint: read them from the flags once
+            self._lengths = episode_lengths(_upstream.stored_tensordict(self), self.end_key)
+        return self._lengths[rows]
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if isinstance(data, TensorDictBase):
@@ -28,6 +42,21 @@ class _EpisodeRows:
                     f"{self.shape[1]}-step episodes"
                 )
         super().set(cursor, data, set_cursor=set_cursor)
+        if isinstance(data, TensorDictBase):
+            if self._lengths is None:  # first write, or first since a restore: every row from its flags
+                self.valid_lengths(torch.zeros(0, dtype=torch.long))
+            else:
+                # self.shape counts the filled rows only; the lengths cover every row.
+                n_rows = self._lengths.numel()
+                self._lengths[torch.arange(n_rows)[cursor]] = episode_lengths(data, self.end_key)
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        super().load_state_dict(state_dict)
+        self._lengths = None
+
+    def loads(self, path: Any) -> None:
+        super().loads(path)
+        self._lengths = None
 
 
 @dataclass(frozen=True)
@@ -61,7 +90,8 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
     """In-memory TorchRL storage of episodes as ``[episode, t]`` rows; ``capacity`` in transitions.
 
     A :class:`~torchrl.data.LazyTensorStorage` with ``ndim=2`` whose writes
-    must be whole episodes of one fixed length. Its entries are laid out
+    must be whole episodes of one fixed length; an episode may end before its
+    row does, at its first ``end_key`` flag (:meth:`valid_lengths`). Its entries are laid out
     transition-major: all entries of one dtype share one ``[rows, T, features]``
     block, and each entry is a view into it. Drawing ``(episode, step)`` pairs
     then reads one contiguous run of memory per transition and dtype instead of
@@ -80,8 +110,15 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         torch.Size([3, 50])
     """
 
-    def __init__(self, capacity: int = 1_000_000, *, device: torch.device | str = "cpu") -> None:
+    def __init__(
+        self,
+        capacity: int = 1_000_000,
+        *,
+        device: torch.device | str = "cpu",
+        end_key: NestedKey = ("next", "done"),
+    ) -> None:
         super().__init__(int(capacity), ndim=2, device=device)
+        self.end_key = end_key
         self._layout_source: TensorDictBase | None = None
 
     def _layout(self) -> tuple[dict[torch.dtype, torch.Tensor], list[_Field]]:
@@ -155,5 +192,7 @@ class EpisodeMemmapStorage(_EpisodeRows, LazyMemmapStorage):
         *,
         scratch_dir: str | None = None,
         device: torch.device | str = "cpu",
+        end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(int(capacity), ndim=2, scratch_dir=scratch_dir, device=device)
+        self.end_key = end_key
