@@ -179,8 +179,7 @@ class HindsightRelabel(SampleUnit):
         lengths = None
         if isinstance(storage, _EpisodeRows) and storage.end_key == self.end_key:
             lengths = storage.valid_lengths(rows)
-        # A slice of a tensor storage is a view: no copy of the buffer.
-        entries = self.relabel(storage.get(slice(None)), rows, steps, generator, lengths)
+        entries = self.relabel(_upstream.stored_tensordict(storage), rows, steps, generator, lengths)
         if self.relabelled_key is not None:
             info[self.relabelled_key] = entries.pop(self.relabelled_key)
         self._pending.entries = entries
