@@ -149,3 +149,17 @@ def test_valid_lengths_survive_a_save_and_load(tmp_path):
     length = torch.tensor([9, 50, 4, 20])[episode]
     assert (batch["index"][:, 1] < length).all() and (state <= length).all()
     assert torch.equal(restored.storage.valid_lengths(torch.arange(4)), torch.tensor([9, 50, 4, 20]))
+
+
+def test_a_sampler_state_saved_before_valid_lengths_still_draws_inside_episodes():
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=6 * T, batch_size=4096)
+    rb.extend(ending_early(3, [9, 50, 4]))
+    old_state = {k: v for k, v in rb.sampler.state_dict().items() if k != "lengths"}
+    restored = CEBPSampler()
+    restored.load_state_dict(old_state)
+    rows, steps = restored.sample(rb.storage, 4096)[0]
+    assert (steps < torch.tensor([9, 50, 4])[rows]).all()
+    rb.sampler.load_state_dict(old_state)
+    rb.sample()
+    rb.extend(ending_early(3, [5, 6, 7], first_id=3))  # rows past the filled ones still get their lengths
+    assert rb.sampler.state_dict()["lengths"][:6].tolist() == [9, 50, 4, 5, 6, 7]

@@ -243,6 +243,10 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
         if self._n_stored == 0:
             raise RuntimeError(f"{type(self).__name__}: cannot sample from an empty buffer")
+        if self._lengths.numel() and self._lengths[0] < 0:
+            filled = episode_lengths(storage.get(slice(None)), self.end_key)  # the filled rows only
+            self._lengths = torch.full_like(self._lengths, storage.shape[1])
+            self._lengths[: filled.numel()] = filled
         rows = self.draw_episodes(batch_size)
         steps = self.draw_steps(rows)
         info: dict[str, Any] = {}
@@ -260,7 +264,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         self._priorities = state_dict["priorities"].clone().to(torch.float64)
-        self._lengths = state_dict["lengths"].clone()
+        # States saved before episodes could end early carry no lengths: read them from the storage at the next draw.
+        lengths = state_dict.get("lengths")
+        self._lengths = torch.full_like(self._priorities, -1, dtype=torch.long) if lengths is None else lengths.clone()
         self._n_stored = int(state_dict["n_stored"])
         steps = state_dict.get("cumulative_step_weights")
         self._cumulative_step_weights = None if steps is None else steps.clone()
