@@ -254,3 +254,16 @@ def test_every_row_names_the_commit_it_ran_on(tmp_path):
         pytest.skip("not a git checkout")
     assert log[0]["code_commit"].removesuffix("+dirty") == commit.stdout.strip()
     assert float(log[0]["load_avg"]) >= 0.0
+
+
+def test_per_resumes_its_beta_from_a_checkpoint_written_before_the_scheduler(tmp_path):
+    per = ("sampler=per", "sampler.beta_anneal_draws=12")  # the 2-epoch run's horizon, for the split run too
+    straight = rows(train(config(*per), tmp_path / "straight"))
+    train(config(*per, "epochs=1"), tmp_path / "split")
+    state = load_checkpoint(tmp_path / "split")
+    # the layout before the TorchRL scheduler: the draw count lived in PER's own state
+    state["replay"]["_sampler"]["draws"] = state.pop("beta_scheduler")["_step_cnt"]
+    torch.save(state, tmp_path / "split" / "checkpoint.pt")
+    resumed = rows(train(config(*per, "resume=true"), tmp_path / "split"))
+    for key in ("loss_value", "is_weight_mean", "is_weight_min"):
+        assert [float(r[key]) for r in resumed] == pytest.approx([float(r[key]) for r in straight], rel=1e-5)

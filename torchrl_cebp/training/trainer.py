@@ -174,7 +174,9 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
 
     # Replay: whole episodes as rows, the configured sampler, HER relabelling at sampling time.
     her = HindsightRelabel(spec_env.compute_reward, future_p=cfg.replay.future_p, strategy=cfg.replay.strategy)
-    replay = make_replay_buffer(sampler, her, capacity=cfg.replay.capacity, batch_size=cfg.batch_size * cfg.workers)
+    # A generator of its own for every replay draw: TorchRL's PER falls back to numpy's unseeded global RNG without one.
+    replay = make_replay_buffer(sampler, her, capacity=cfg.replay.capacity, batch_size=cfg.batch_size * cfg.workers,
+                                generator=torch.Generator().manual_seed(derive_seed(cfg.seed, 3)))
     normalizer_feed = RelabelledTransitions(her)
     beta_scheduler = sampler.beta_scheduler() if isinstance(sampler, PERSampler) else None
 
@@ -191,7 +193,9 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         critic_optim.load_state_dict(state["critic_optim"])
         replay.load_state_dict(state["replay"])
         if beta_scheduler is not None:
-            beta_scheduler.load_state_dict(state["beta_scheduler"])
+            # Checkpoints from before the scheduler kept the draw count in PER's own state.
+            draws = state["replay"]["_sampler"].get("draws", 0)
+            beta_scheduler.load_state_dict(state.get("beta_scheduler", {**beta_scheduler.state_dict(), "_step_cnt": draws}))
         # Restored last, so that building the agent above draws nothing from the restored stream.
         set_rng_state(state["rng"])
         start_epoch, wall_before = state["epoch"] + 1, state["wall_s"]
