@@ -5,6 +5,7 @@ import torch
 from torchrl.envs import Transform, TransformedEnv
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
+from tests.replay.test_buffer import SAMPLERS
 from tests.replay.test_her import decode, labelled_episodes
 from torchrl_cebp.envs import make_env
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION
@@ -20,16 +21,6 @@ from torchrl_cebp.samplers import (
     UniformEpisodeSampler,
 )
 
-SAMPLERS = {
-    "uniform": lambda capacity: UniformEpisodeSampler(),
-    "cebp": lambda capacity: CEBPSampler(),
-    "cebp_released": lambda capacity: ReleasedCEBPSampler(workspace=PUSH_WORKSPACE),
-    "cebp_initial": lambda capacity: InitialCEBPSampler(workspace=PUSH_WORKSPACE),
-    "cper": lambda capacity: CPERSampler(),
-    "ebp": lambda capacity: EBPSampler(),
-    "mep": lambda capacity: MEPSampler(n_components=2),
-    "per": PERSampler,
-}
 
 
 def ending_early(n, lengths, first_id=0, padding="garbage"):
