@@ -4,7 +4,7 @@ import pytest
 import torch
 from torchrl.envs import Transform, TransformedEnv
 
-from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
+from tests.replay.conftest import T, make_episodes, sparse_reward
 from tests.replay.test_buffer import SAMPLERS
 from tests.replay.test_her import decode, labelled_episodes
 from torchrl_cebp.envs import make_env
@@ -12,12 +12,8 @@ from torchrl_cebp.envs.layout import FETCH_OBSERVATION
 from torchrl_cebp.replay import HindsightRelabel, episode_lengths, make_replay_buffer
 from torchrl_cebp.samplers import (
     CEBPSampler,
-    CPERSampler,
-    EBPSampler,
-    InitialCEBPSampler,
     MEPSampler,
     PERSampler,
-    ReleasedCEBPSampler,
     UniformEpisodeSampler,
 )
 
