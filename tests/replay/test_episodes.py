@@ -56,6 +56,28 @@ def test_no_padding_drawn_and_no_goal_past_the_end_with_wrap_around(name):
         assert sampler.probabilities(torch.tensor([3]))[0] > 0  # row 3 holds it
 
 
+@pytest.mark.parametrize("name", sorted(SAMPLERS))
+def test_episodes_of_one_shared_short_length_then_mixed_lengths(name):
+    # Draws take a cheaper path while every stored episode has the same length: it must still stop there.
+    sampler = SAMPLERS[name](4 * T)
+    rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward, future_p=1.0), capacity=4 * T, batch_size=4096)
+    rb.extend(ending_early(4, [9, 9, 9, 9]))
+    if isinstance(sampler, MEPSampler):
+        sampler.refit(rb.storage)
+    batch = rb.sample()
+    episode, state = decode(batch["desired_goal"])
+    assert batch["index"][:, 1].max() == 8 and state.max() == 9
+    rb.extend(ending_early(1, [50], first_id=4))  # row 0: now one long episode among short ones
+    if isinstance(sampler, MEPSampler):
+        sampler.refit(rb.storage)
+    batch = rb.sample()
+    episode, state = decode(batch["desired_goal"])
+    steps = batch["index"][:, 1]
+    long_episode = episode == 4
+    assert (steps[~long_episode] < 9).all() and (state[~long_episode] <= 9).all()
+    assert steps[long_episode].max() > 9
+
+
 @pytest.mark.parametrize("name", ["cebp", "cebp_released", "cebp_initial", "cper", "ebp", "mep"])
 def test_priorities_ignore_the_padding(name):
     lengths = [50, 20, 35, 10, 44, 27]

@@ -111,20 +111,23 @@ class HindsightRelabel(SampleUnit):
         self._pending = threading.local()  # expand() -> collate() of one draw, per sampling thread
 
     def goal_steps(
-        self, steps: torch.Tensor, lengths: torch.Tensor, generator: torch.Generator | None = None
+        self, steps: torch.Tensor, lengths: torch.Tensor | int, generator: torch.Generator | None = None
     ) -> torch.Tensor:
         """Index ``j`` into the ``("next", ...)`` entries whose achieved goal becomes the new goal.
 
         ``("next", key)[e, j]`` is state ``j + 1``, so "future" draws ``j`` in ``[t, L - 1]``.
+        ``lengths`` are the episodes' valid lengths, or one length they all share.
         """
         last = lengths - 1
         if self.strategy == "final":
-            return last.clone()
+            return torch.full_like(steps, last) if isinstance(last, int) else last.clone()
         uniform = torch.rand(steps.shape, generator=generator)
         if self.strategy == "episode":
-            return torch.minimum((uniform * lengths).long(), last)
-        offset = (uniform * (lengths - steps).clamp(min=0)).long()
-        return torch.minimum(steps + offset, last)
+            return _at_most((uniform * lengths).long(), last)
+        remaining = lengths - steps
+        # Steps past an episode's end (the normaliser feed reads whole rows) take its last goal.
+        offset = (uniform * remaining.clamp_(min=0)).long()
+        return _at_most(steps + offset, last)
 
     def relabel(
         self,
@@ -132,12 +135,13 @@ class HindsightRelabel(SampleUnit):
         rows: torch.Tensor,
         steps: torch.Tensor,
         generator: torch.Generator | None = None,
-        lengths: torch.Tensor | None = None,
+        lengths: torch.Tensor | int | None = None,
     ) -> dict[NestedKey, torch.Tensor]:
         """The relabelled goal, next goal, reward and coin of transitions ``(rows, steps)`` of ``[N, T]`` episodes.
 
         The one relabelling both the replay draw and the trainer's normaliser feed use.
-        ``lengths`` are the valid lengths of ``rows``, read from the ``end_key`` flags when omitted.
+        ``lengths`` are the valid lengths of ``rows`` (or one length they all share), read from the
+        ``end_key`` flags when omitted.
         """
         generator = self.generator if generator is None else generator
         episode_steps = episodes.shape[1]
@@ -178,7 +182,9 @@ class HindsightRelabel(SampleUnit):
         generator = self.generator if self.generator is not None else _upstream.buffer_generator(storage)
         lengths = None
         if isinstance(storage, _EpisodeRows) and storage.end_key == self.end_key:
-            lengths = storage.valid_lengths(rows)
+            lengths = storage.common_length()
+            if lengths is None:
+                lengths = storage.valid_lengths(rows)
         entries = self.relabel(_upstream.stored_tensordict(storage), rows, steps, generator, lengths)
         if self.relabelled_key is not None:
             info[self.relabelled_key] = entries.pop(self.relabelled_key)
@@ -201,3 +207,6 @@ class HindsightRelabel(SampleUnit):
     def __repr__(self) -> str:
         return f"HindsightRelabel(strategy={self.strategy!r}, future_p={self.future_p})"
 
+
+def _at_most(values: torch.Tensor, bound: torch.Tensor | int) -> torch.Tensor:
+    return values.clamp_(max=bound) if isinstance(bound, int) else torch.minimum(values, bound)

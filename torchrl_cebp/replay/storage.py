@@ -23,11 +23,30 @@ class _EpisodeRows:
     end_key: NestedKey = ("next", "done")
     _lengths: torch.Tensor | None = None
 
+    _common_length: int | None = None
+
     def valid_lengths(self, rows: torch.Tensor) -> torch.Tensor:
         """Valid steps of the episodes stored in ``rows``."""
+        self._read_lengths_if_unknown()
+        return self._lengths.index_select(0, rows)
+
+    def common_length(self) -> int | None:
+        """The valid length every row shares (the row length unless episodes end early), else ``None``.
+
+        Lets a draw skip the per-row lengths in the usual case of episodes that all run a fixed length.
+        """
+        self._read_lengths_if_unknown()
+        return self._common_length
+
+    def _read_lengths_if_unknown(self) -> None:
         if self._lengths is None:  # restored from a checkpoint: read them from the flags once
             self._lengths = episode_lengths(_upstream.stored_tensordict(self), self.end_key)
-        return self._lengths[rows]
+            self._track_common_length()
+
+    def _track_common_length(self) -> None:
+        # Unwritten rows hold no end flag, so they count as full rows: one check covers the filled ones.
+        shared = bool((self._lengths == self._lengths[0]).all())
+        self._common_length = int(self._lengths[0]) if shared else None
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if isinstance(data, TensorDictBase):
@@ -44,11 +63,12 @@ class _EpisodeRows:
         super().set(cursor, data, set_cursor=set_cursor)
         if isinstance(data, TensorDictBase):
             if self._lengths is None:  # first write, or first since a restore: every row from its flags
-                self.valid_lengths(torch.zeros(0, dtype=torch.long))
+                self._read_lengths_if_unknown()
             else:
                 # self.shape counts the filled rows only; the lengths cover every row.
                 n_rows = self._lengths.numel()
                 self._lengths[torch.arange(n_rows)[cursor]] = episode_lengths(data, self.end_key)
+                self._track_common_length()
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         super().load_state_dict(state_dict)
@@ -145,13 +165,14 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             self._layout_source = packed
             self._blocks = {dtype: block.flatten(0, 1) for dtype, block in blocks.items()}
             self._fields = fields
+            self._row_length = steps  # storage.shape is recomputed on every read (~10% of a draw of 256)
         return self._blocks, self._fields
 
     def get(self, index: Any) -> Any:
         if not (self.initialized and _is_pair_index(index)):
             return super().get(index)
         blocks, fields = self._layout()
-        flat = index[0] * self.shape[1] + index[1]
+        flat = index[0] * self._row_length + index[1]
         gathered = {dtype: block.index_select(0, flat) for dtype, block in blocks.items()}
         tree: dict = {}
         for field in fields:

@@ -127,6 +127,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self.end_key = end_key
         self._priorities = torch.zeros(0, dtype=torch.float64)
         self._lengths = torch.zeros(0, dtype=torch.long)
+        self._lengths_unread = False  # restored from a state without lengths: read them at the next draw
+        # The length every stored episode shares, if they share one: steps are then drawn without the lengths.
+        self._common_length: int | None = None
         self._cumulative_step_weights: torch.Tensor | None = None
         self._tree: SumSegmentTreeFp64 | None = None
         self._n_stored = 0
@@ -205,6 +208,12 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 )
             self._cumulative_step_weights[rows] = steps.double().cumsum(-1)
         self._n_stored = max(self._n_stored, int(rows.max()) + 1)
+        self._track_common_length()
+
+    def _track_common_length(self) -> None:
+        stored = self._lengths[: self._n_stored]
+        shared = stored.numel() > 0 and bool((stored == stored[0]).all())
+        self._common_length = int(stored[0]) if shared else None
 
     def set_priorities(self, rows: torch.Tensor, priority: torch.Tensor) -> None:
         """Overwrites the priorities of ``rows`` (used on write, and by samplers that re-rank)."""
@@ -228,7 +237,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def draw_steps(self, rows: torch.Tensor) -> torch.Tensor:
         """A valid step per drawn row: uniform, or by the cumulative step weights."""
-        lengths = self._lengths[rows]
+        if self._cumulative_step_weights is None and self._common_length is not None:
+            return torch.randint(self._common_length, rows.shape, generator=self._rng)
+        lengths = self._lengths.index_select(0, rows)
         if self._cumulative_step_weights is None:
             return (self._uniform(rows.numel()) * lengths).long().clamp_(max=lengths - 1)
         cumulative = self._cumulative_step_weights[rows]
@@ -243,10 +254,12 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
         if self._n_stored == 0:
             raise RuntimeError(f"{type(self).__name__}: cannot sample from an empty buffer")
-        if self._lengths.numel() and self._lengths[0] < 0:
+        if self._lengths_unread:
             filled = episode_lengths(storage.get(slice(None)), self.end_key)  # the filled rows only
             self._lengths = torch.full_like(self._lengths, storage.shape[1])
             self._lengths[: filled.numel()] = filled
+            self._lengths_unread = False
+            self._track_common_length()
         rows = self.draw_episodes(batch_size)
         steps = self.draw_steps(rows)
         info: dict[str, Any] = {}
@@ -266,8 +279,12 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._priorities = state_dict["priorities"].clone().to(torch.float64)
         # States saved before episodes could end early carry no lengths: read them from the storage at the next draw.
         lengths = state_dict.get("lengths")
-        self._lengths = torch.full_like(self._priorities, -1, dtype=torch.long) if lengths is None else lengths.clone()
+        self._lengths_unread = lengths is None
+        self._lengths = torch.zeros_like(self._priorities, dtype=torch.long) if lengths is None else lengths.clone()
         self._n_stored = int(state_dict["n_stored"])
+        self._common_length = None
+        if not self._lengths_unread:
+            self._track_common_length()
         steps = state_dict.get("cumulative_step_weights")
         self._cumulative_step_weights = None if steps is None else steps.clone()
         self._tree = SumSegmentTreeFp64(self._priorities.numel())
@@ -277,6 +294,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     def _empty(self) -> None:
         self._priorities.zero_()
         self._lengths.zero_()
+        self._common_length = None
         if self._tree is not None:
             self._tree = SumSegmentTreeFp64(self._priorities.numel())
         self._cumulative_step_weights = None
