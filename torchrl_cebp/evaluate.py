@@ -27,15 +27,13 @@ def _checkpoint_env(checkpoint: Path, **kwargs):
     return make_env_from_config(torch.load(path, map_location="cpu", weights_only=True)["config"]["env"], **kwargs)
 
 
-@torch.no_grad()
 def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -> float:
-    """Fraction of ``episodes`` deterministic episodes that end within the goal threshold."""
+    """Fraction of ``episodes`` deterministic episodes that end within the goal threshold (the trainer's measure)."""
     from torchrl_cebp.training import load_policy
+    from torchrl_cebp.training.evaluation import evaluate_success_rate
 
-    policy = load_policy(checkpoint)
     env = _checkpoint_env(Path(checkpoint), seed=seed, num_envs=episodes)
-    rollout = env.rollout(env.max_episode_steps, policy, break_when_any_done=False)
-    return rollout["next", "is_success"][:, -1].float().mean().item()
+    return evaluate_success_rate(env, load_policy(checkpoint), episodes)
 
 
 @torch.no_grad()

@@ -34,8 +34,7 @@ from torchrl_cebp.stats import (  # noqa: E402
     probability_of_improvement_ci,
     stratified_bootstrap_ci,
 )
-
-CSV_NAME = "progress.csv"
+from torchrl_cebp.training.metrics import CSV_NAME  # noqa: E402
 
 
 def read_curve(path: Path, metric: str) -> np.ndarray:

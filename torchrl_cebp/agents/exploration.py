@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
@@ -18,8 +19,11 @@ class HERExploration(TensorDictModuleBase):
     plain policy for test episodes. Place it after the actor in a
     :class:`~tensordict.nn.TensorDictSequential`.
 
-    Draws from ``generator`` (torch's global one when ``None``): with its own generator,
-    the exploration stream is reproducible wherever the episodes are collected.
+    Draws from ``generator`` (torch's global one when ``None``). :meth:`reseed` restarts the
+    stream reproducibly wherever the module runs: the seed is a buffer, so it travels with the
+    policy's weights into a collector's worker processes, and the first call after it changes
+    restarts the generator from the seed and that call's observations. Each worker of a
+    multi-process collector (its envs seeded apart) thereby gets its own stream.
 
     Examples:
         >>> from tensordict import TensorDict
@@ -31,6 +35,12 @@ class HERExploration(TensorDictModuleBase):
         >>> with set_exploration_type(ExplorationType.DETERMINISTIC):
         ...     bool((explore(td.clone())["action"] == 0).all())
         True
+        >>> td["observation"] = torch.ones(1000, 25)
+        >>> explore.reseed(7)
+        >>> first = explore(td.clone())["action"]
+        >>> explore.reseed(7)
+        >>> bool((explore(td.clone())["action"] == first).all())
+        True
     """
 
     def __init__(
@@ -41,6 +51,7 @@ class HERExploration(TensorDictModuleBase):
         low: float = -1.0,
         high: float = 1.0,
         action_key: str = "action",
+        observation_key: str = "observation",
         generator: torch.Generator | None = None,
     ) -> None:
         super().__init__()
@@ -50,11 +61,35 @@ class HERExploration(TensorDictModuleBase):
         self.noise_std = noise_std
         self.low = low
         self.high = high
+        self.observation_key = observation_key
         self.generator = generator
+        # (seed, how many reseeds so far): a buffer, so that a weight sync carries a reseed to the workers.
+        self.register_buffer("noise_seed", torch.zeros(2, dtype=torch.int64))
+        self._applied_reseeds = 0
+
+    def reseed(self, seed: int) -> None:
+        """Restarts the noise stream from ``seed`` at the next call (here, or in a worker after a weight sync)."""
+        if seed < 0:
+            raise ValueError(f"seed must be non-negative, got {seed}")
+        self.noise_seed[0] = seed
+        self.noise_seed[1] += 1
+
+    def _restart_if_reseeded(self, td: TensorDictBase) -> None:
+        seed, reseeds = self.noise_seed.tolist()
+        if reseeds == self._applied_reseeds:
+            return
+        self._applied_reseeds = reseeds
+        observation = td.get(self.observation_key, None)
+        # The observations tell workers apart: they run the same policy copy on envs seeded apart.
+        mixed = [seed] if observation is None else [seed, *np.frombuffer(observation.float().numpy().tobytes()[:4096], np.uint32)]
+        if self.generator is None:  # from now on, off torch's global stream
+            self.generator = torch.Generator(device=td.device or "cpu")
+        self.generator.manual_seed(int(np.random.SeedSequence(mixed).generate_state(1)[0]))
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         if exploration_type() not in (ExplorationType.RANDOM, None):
             return td
+        self._restart_if_reseeded(td)
         action = td.get(self.in_keys[0])
         noise = torch.randn(action.shape, generator=self.generator, device=action.device, dtype=action.dtype)
         noisy = (action + self.noise_std * noise).clamp(self.low, self.high)

@@ -70,7 +70,23 @@ class _EpisodeRows:
                 self._lengths[torch.arange(n_rows)[cursor]] = episode_lengths(data, self.end_key)
                 self._track_common_length()
 
+    def state_dict(self) -> dict[str, Any]:
+        """The storage's state with its filled rows only, so that a checkpoint grows with the stored episodes."""
+        state = super().state_dict()
+        if self.initialized:
+            filled_rows = self.shape[0]
+            state["_storage"] = self.get(slice(0, filled_rows)).apply(torch.clone).state_dict()
+            state["rows"] = self.max_size // self.shape[1]
+        return state
+
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        rows = state_dict.get("rows")
+        if rows is not None:  # the filled rows, back into a storage of the full capacity
+            filled = TensorDict().load_state_dict(state_dict["_storage"], strict=False)
+            full = filled.apply(lambda t: torch.zeros((rows, *t.shape[1:]), dtype=t.dtype),
+                                batch_size=[rows, *filled.shape[1:]])
+            full[: filled.shape[0]] = filled
+            state_dict = {**state_dict, "_storage": full.state_dict()}
         super().load_state_dict(state_dict)
         self._lengths = None
 

@@ -7,11 +7,19 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from omegaconf import DictConfig, OmegaConf
 from tensordict.nn import TensorDictSequential
+from torchrl.data import TensorDictReplayBuffer
+from torchrl.data.replay_buffers.scheduler import LinearScheduler
 
 from torchrl_cebp.agents import ObsGoalNormalizer, make_actor
+from torchrl_cebp.training.builders import Agent
+from torchrl_cebp.training.config import ConfigError, check_same_run
 
 CHECKPOINT_NAME = "checkpoint.pt"
+# 2: episodes from TorchRL collectors, one optimiser over actor and critic. Runs of format 1 (a hand-written
+# rollout worker) cannot be continued by this trainer: their exploration streams differ.
+CHECKPOINT_FORMAT = 2
 
 
 def save_checkpoint(state: dict[str, Any], run_dir: str | Path) -> Path:
@@ -40,6 +48,48 @@ def load_checkpoint(run_dir: str | Path, map_location: torch.device | str = "cpu
 
 def has_checkpoint(run_dir: str | Path) -> bool:
     return (Path(run_dir) / CHECKPOINT_NAME).is_file()
+
+
+def training_state(
+    epoch: int, wall_s: float, cfg: DictConfig, agent: Agent, optimizer: torch.optim.Optimizer,
+    replay: TensorDictReplayBuffer, beta_scheduler: LinearScheduler | None,
+) -> dict[str, Any]:
+    """Everything a resumed run needs after ``epoch``, as plain tensors and dicts."""
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "epoch": epoch,
+        "wall_s": wall_s,
+        "config": OmegaConf.to_container(cfg, resolve=True),
+        "loss": agent.loss.state_dict(),
+        "normalizer": agent.normalizer.state_dict(),
+        "optimizer": optimizer.state_dict(),
+        "replay": replay.state_dict(),
+        **({"beta_scheduler": beta_scheduler.state_dict()} if beta_scheduler is not None else {}),
+        "rng": rng_state(),
+    }
+
+
+def restore_training_state(
+    state: dict[str, Any], cfg: DictConfig, agent: Agent, optimizer: torch.optim.Optimizer,
+    replay: TensorDictReplayBuffer, beta_scheduler: LinearScheduler | None,
+) -> tuple[int, float]:
+    """Loads a :func:`training_state` into the run's parts; returns the epoch to start from and the wall time so far."""
+    if state.get("format") != CHECKPOINT_FORMAT:
+        raise ConfigError(
+            f"cannot resume: the checkpoint has format {state.get('format', 1)}, this trainer writes format "
+            f"{CHECKPOINT_FORMAT} (episodes from TorchRL collectors); continue it with the commit in its "
+            "progress.csv's code_commit column, or start a new run"
+        )
+    check_same_run(state["config"], cfg)
+    agent.loss.load_state_dict(state["loss"])
+    agent.normalizer.load_state_dict(state["normalizer"])
+    optimizer.load_state_dict(state["optimizer"])
+    replay.load_state_dict(state["replay"])
+    if beta_scheduler is not None:
+        beta_scheduler.load_state_dict(state["beta_scheduler"])
+    # Restored last, so that building the run's parts drew nothing from the restored stream.
+    set_rng_state(state["rng"])
+    return state["epoch"] + 1, state["wall_s"]
 
 
 def rng_state() -> dict[str, Any]:

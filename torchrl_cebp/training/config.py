@@ -17,7 +17,6 @@ from torchrl_cebp.replay.her import STRATEGIES
 from torchrl_cebp.training.metrics import LOGGERS
 
 DEVICES = ("auto", "cpu", "cuda")
-ENV_BACKENDS = ("serial", "parallel")
 PRECISIONS = ("fp32", "bf16")
 
 # ``${mul:a,b,...}`` lets a config derive a count, e.g. PER's beta-annealing horizon.
@@ -101,7 +100,6 @@ def validate_config(cfg: DictConfig) -> None:
             if OmegaConf.select(cfg, f"env.{key}", default=default) != default:
                 errors.append(f"  env.{key}={OmegaConf.select(cfg, f'env.{key}')!r}: the Franka task has the mocap robot "
                               f"with its own pads only; use env.{key}={default!r}")
-    one_of("env_backend", ENV_BACKENDS)
     one_of("precision", PRECISIONS)
     one_of("logger", LOGGERS)
     one_of("replay.strategy", STRATEGIES)
@@ -113,8 +111,13 @@ def validate_config(cfg: DictConfig) -> None:
         positive_int(key)
     check("resume", lambda v: isinstance(v, bool), "true or false")
     check("overlap_collection", lambda v: isinstance(v, bool), "true or false")
-    if cfg.get("overlap_collection") is True and cfg.get("env_backend") == "parallel":
-        errors.append("  overlap_collection=true: collects in one worker process, so needs env_backend=serial")
+    check("collector_processes", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
+    processes = cfg.get("collector_processes")
+    if _is_int(processes) and processes > 0 and all(_is_int(cfg.get(k)) for k in ("rollouts_per_cycle", "workers")):
+        n_envs = cfg.rollouts_per_cycle * cfg.workers
+        if n_envs % processes:
+            errors.append(f"  collector_processes={processes}: must divide the {n_envs} episodes of a cycle "
+                          "(rollouts_per_cycle x workers) evenly")
     real_in("replay.future_p", 0.0, 1.0)
     real_in("agent.tau", 0.0, 1.0, open_low=True)
     real_in("agent.random_eps", 0.0, 1.0)

@@ -9,6 +9,7 @@ from typing import Any
 
 from torchrl.record.loggers import Logger, get_logger
 
+CSV_NAME = "progress.csv"
 # Where the per-epoch rows go besides the CSV, through TorchRL's loggers.
 LOGGERS = ("none", "tensorboard", "wandb", "mlflow")
 
@@ -100,3 +101,28 @@ class EpochCsv:
             self._rewrite(kept)
         with self.path.open("a", newline="") as f:
             csv.DictWriter(f, fieldnames=self._fields).writerow(row)
+
+
+class EpochLog:
+    """Where an epoch's row goes: ``run_dir/progress.csv`` (with the code's commit) and the configured TorchRL logger.
+
+    Example:
+        >>> import tempfile, pathlib
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     log = EpochLog(d, start_epoch=0, logger="none")
+        ...     log.write(0, {"test_success": 0.5})
+        ...     log.csv_path.read_text().splitlines()[0]
+        'epoch,test_success,code_commit'
+    """
+
+    def __init__(self, run_dir: str | Path, start_epoch: int, logger: str) -> None:
+        self.csv_path = Path(run_dir) / CSV_NAME
+        self._csv = EpochCsv(self.csv_path, start_epoch)
+        self._logger = make_logger(logger, run_dir)
+        self._commit = code_version()
+
+    def write(self, epoch: int, row: dict[str, float]) -> None:
+        self._csv.write({"epoch": epoch, **row, "code_commit": self._commit})
+        if self._logger is not None:
+            for key, value in row.items():
+                self._logger.log_scalar(key, value, step=epoch)

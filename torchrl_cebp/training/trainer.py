@@ -1,60 +1,54 @@
-"""DDPG + HER training with any of the replay samplers, as in baselines' HER (readable top to bottom).
+"""DDPG + HER training with any of the replay samplers, as in baselines' HER, over TorchRL's loss, target updater and collectors.
 
 An epoch is ``cycles_per_epoch`` cycles; a cycle collects ``rollouts_per_cycle x workers``
-whole episodes from a batched env, stores them, runs ``updates_per_cycle`` updates of
-``batch_size x workers`` transitions, and moves the target networks. Each epoch ends with
-deterministic test episodes, a CSV row and a checkpoint. With ``overlap_collection`` a worker
-process collects the next cycle's episodes while this one's updates run.
+whole episodes, stores them, runs ``updates_per_cycle`` updates of ``batch_size x workers``
+transitions, and moves the target networks. Each epoch ends with deterministic test episodes,
+a CSV row and a checkpoint. With ``overlap_collection`` an env process collects the next cycle's
+episodes while this one's updates run.
 """
 
 from __future__ import annotations
 
-import functools
-import math
 import os
 import time
 from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
 import torch
 from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from tensordict import TensorDict, TensorDictBase
-from tensordict.nn import TensorDictSequential
+from torchrl.data import TensorDictReplayBuffer
 from torchrl.data.replay_buffers.samplers import Sampler
-from torchrl.envs import EnvBase, ParallelEnv
-from torchrl.envs.utils import ExplorationType, set_exploration_type
-from torchrl.objectives import SoftUpdate
 from tqdm import tqdm
 
-from torchrl_cebp.agents import HERDDPGLoss, make_critic
-from torchrl_cebp.envs import make_env_from_config
-from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
-from torchrl_cebp.samplers import PERSampler
+from torchrl_cebp.replay import HindsightRelabel
+from torchrl_cebp.samplers import EpisodePrioritySampler, PERSampler
+from torchrl_cebp.training.builders import (
+    Agent,
+    TaskDims,
+    derive_seed,
+    episodes_per_cycle,
+    make_agent,
+    make_env,
+    make_optimizer,
+    make_replay,
+    make_training_collector,
+)
 from torchrl_cebp.training.checkpoint import (
     has_checkpoint,
     load_checkpoint,
-    rng_state,
+    restore_training_state,
     save_checkpoint,
-    set_rng_state,
+    training_state,
 )
-from torchrl_cebp.training.config import (
-    ConfigError,
-    check_same_run,
-    resolve_device,
-    validate_config,
-    warn_if_bf16_is_emulated,
-)
-from torchrl_cebp.training.metrics import EpochCsv, code_version, make_logger
-from torchrl_cebp.training.rollouts import RolloutWorker, Rollouts, Seeds, make_policy
+from torchrl_cebp.training.collection import EpisodeBatches
+from torchrl_cebp.training.config import ConfigError, resolve_device, validate_config, warn_if_bf16_is_emulated
+from torchrl_cebp.training.evaluation import evaluate_success_rate
+from torchrl_cebp.training.metrics import EpochLog
 
-CSV_NAME = "progress.csv"
-
-
-def derive_seed(*keys: int) -> int:
-    """A 31-bit seed for one stream (e.g. ``(seed, epoch, stream)``), independent of the others."""
-    return int(np.random.SeedSequence(list(keys)).generate_state(1)[0] >> 1)
+# The streams derive_seed(seed, epoch, stream) names: each epoch restarts them, so a resumed run repeats.
+COLLECTION_STREAM, TEST_STREAM = 0, 1
 
 
 class RelabelledTransitions:
@@ -84,46 +78,104 @@ class RelabelledTransitions:
                           [goal.shape[0]])
 
 
-@torch.no_grad()
-def evaluate_success_rate(env: EnvBase, policy: TensorDictSequential, n_episodes: int, episode_steps: int) -> float:
-    """Success rate at the last step of ``n_episodes`` deterministic episodes on the batched ``env``."""
-    successes = []
-    with set_exploration_type(ExplorationType.DETERMINISTIC):
-        for _ in range(math.ceil(n_episodes / env.batch_size[0])):
-            rollout = env.rollout(episode_steps, policy, break_when_any_done=False)
-            successes.append(rollout["next", "is_success"][:, -1, 0])
-    return torch.cat(successes)[:n_episodes].float().mean().item()
-
-
-def make_task_env(cfg: DictConfig, **kwargs) -> EnvBase:
-    """The configured task's env: ``cfg.env``'s task, goal space and robot; ``kwargs`` go to :func:`make_env`."""
-    return make_env_from_config(cfg.env, **kwargs)
-
-
-def make_batched_env(cfg: DictConfig, n_envs: int, device: torch.device | str = "cpu") -> EnvBase:
-    """``n_envs`` simulations of the task: stepped in turn by one env, or one process each (``env_backend``)."""
-    if cfg.env_backend == "parallel":
-        return ParallelEnv(n_envs, functools.partial(make_task_env, cfg, device=device))
-    return make_task_env(cfg, device=device, num_envs=n_envs)
-
-
-def make_rollouts(cfg: DictConfig, dims: tuple[int, int, int], episode_steps: int) -> Rollouts:
-    """The training episodes' env and a copy of the exploration policy, with its own noise generator."""
-    _, explore = make_policy(
-        *dims, cfg.agent.hidden, random_eps=cfg.agent.random_eps, noise_std=cfg.agent.noise_std,
-        generator=torch.Generator(),
-    )
-    n_envs = cfg.rollouts_per_cycle * cfg.workers
-    return Rollouts(make_batched_env(cfg, n_envs), explore, episode_steps, drop_keys=["agent_input"])
-
-
 def sampling_spread(sampler: Sampler) -> dict[str, float]:
-    """Effective fraction of stored episodes the sampler draws from, ``1 / (N sum p^2)``, when it exposes ``p``."""
-    n = getattr(sampler, "n_episodes", 0)
-    if not n or not hasattr(sampler, "probabilities"):
+    """Effective fraction of stored episodes an episode sampler draws from, ``1 / (N sum p^2)``."""
+    if not isinstance(sampler, EpisodePrioritySampler) or not sampler.n_episodes:
         return {}
+    n = sampler.n_episodes
     p = sampler.probabilities(torch.arange(n))
     return {"priority_ess_fraction": (1.0 / (n * p.square().sum())).item()}
+
+
+class Learner:
+    """The gradient side of a cycle: store episodes, draw, update actor and critic, move the targets."""
+
+    def __init__(self, cfg: DictConfig, agent: Agent, optimizer: torch.optim.Optimizer, replay: TensorDictReplayBuffer,
+                 her: HindsightRelabel, sampler: Sampler, device: torch.device) -> None:
+        self.cfg, self.agent, self.optimizer, self.replay, self.sampler, self.device = (
+            cfg, agent, optimizer, replay, sampler, device)
+        self.normalizer_feed = RelabelledTransitions(her)
+        self.beta_scheduler = sampler.beta_scheduler() if isinstance(sampler, PERSampler) else None
+        self.totals: dict[str, torch.Tensor] = defaultdict(float)
+
+    def store(self, episodes: TensorDictBase) -> None:
+        self.replay.extend(episodes)
+        self.agent.normalizer.update(self.normalizer_feed(episodes))
+
+    def update(self) -> None:
+        batch = self.replay.sample().to(self.device)
+        if self.beta_scheduler is not None:
+            self.beta_scheduler.step()
+        self.agent.normalizer(batch)
+        self.agent.normalizer(batch["next"])
+        with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.cfg.precision == "bf16"):
+            losses = self.agent.loss(batch)
+        self.optimizer.zero_grad()
+        (losses["loss_actor"] + losses["loss_value"]).backward()
+        self.optimizer.step()
+        self.replay.update_tensordict_priority(batch)  # a no-op unless the sampler is PER
+        for key in ("loss_actor", "loss_value", "action_l2"):
+            self.totals[key] += losses[key].detach()
+        self.totals["q_mean"] += losses["pred_value"].mean()
+        if "priority_weight" in batch.keys():
+            self.totals["is_weight_mean"] += batch["priority_weight"].mean()
+            self.totals["is_weight_min"] += batch["priority_weight"].min()
+
+    def refit_sampler(self) -> None:
+        """The sampler's once-an-epoch re-ranking of the stored episodes (MEP's density model)."""
+        if isinstance(self.sampler, EpisodePrioritySampler):
+            self.sampler.refit(self.replay.storage)
+
+    def epoch_means(self) -> dict[str, float]:
+        """Per-update means of the losses and weights since the last call, and the sampler's spread."""
+        n_updates = self.cfg.cycles_per_epoch * self.cfg.updates_per_cycle
+        means = {key: (value / n_updates).item() for key, value in self.totals.items()}
+        self.totals.clear()
+        return {**means, **sampling_spread(self.sampler)}
+
+
+def run_epoch(cfg: DictConfig, epoch: int, learner: Learner, batches: EpisodeBatches) -> dict[str, float]:
+    """One epoch's cycles; returns its timings (seconds) and mean load."""
+    overlap = cfg.overlap_collection
+    collect_s = update_s = load = 0.0
+    for cycle in range(cfg.cycles_per_epoch):
+        tick = time.perf_counter()
+        if cycle == 0 or not overlap:
+            # The epoch's first batch restarts the collection streams; without overlap each batch
+            # is collected here, with the policy of the end of the last cycle, as baselines does.
+            seed = derive_seed(cfg.seed, epoch, COLLECTION_STREAM) if cycle == 0 else None
+            batches.request(seed, background=overlap)
+        learner.store(batches.result())
+        if overlap and cycle + 1 < cfg.cycles_per_epoch:
+            # The next cycle's episodes, collected during this cycle's updates: one cycle stale.
+            batches.request(background=True)
+        collect_s += time.perf_counter() - tick
+
+        tick = time.perf_counter()
+        for _ in range(cfg.updates_per_cycle):
+            # The collecting process holds a core: one thread fewer until it is done, so that
+            # the two never oversubscribe the cores and the updates get them all afterwards.
+            threads = max(1, cfg.threads - 1) if batches.busy() else cfg.threads
+            if threads != torch.get_num_threads():
+                torch.set_num_threads(threads)
+            learner.update()
+        learner.agent.target_updater.step()
+        update_s += time.perf_counter() - tick
+        load += os.getloadavg()[0] / cfg.cycles_per_epoch
+    learner.refit_sampler()
+    return {"collect_s": collect_s, "update_s": update_s, "load_avg": load}
+
+
+def prepare_run_dir(cfg: DictConfig, run_dir: str | Path) -> tuple[Path, bool]:
+    """Creates ``run_dir``; returns it and whether the run resumes from its checkpoint."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if has_checkpoint(run_dir) and not cfg.resume:
+        raise ConfigError(
+            f"{run_dir} already holds a checkpoint: pass resume=true to continue that run, "
+            "or choose another output directory (hydra.run.dir=...)"
+        )
+    return run_dir, cfg.resume and has_checkpoint(run_dir)
 
 
 def train(cfg: DictConfig, run_dir: str | Path) -> Path:
@@ -136,175 +188,51 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
     sampler = instantiate(cfg.sampler)  # here, so that a bad sampler argument fails before the envs start
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    resuming = cfg.resume and has_checkpoint(run_dir)
-    if has_checkpoint(run_dir) and not cfg.resume:
-        raise ConfigError(
-            f"{run_dir} already holds a checkpoint: pass resume=true to continue that run, "
-            "or choose another output directory (hydra.run.dir=...)"
-        )
+    run_dir, resuming = prepare_run_dir(cfg, run_dir)
     device = resolve_device(cfg.device)
     warn_if_bf16_is_emulated(cfg.precision, device)
-    use_bf16 = cfg.precision == "bf16"
 
-    # Environments: the training episodes come from a copy of the policy (in a worker process
-    # with overlap_collection), the test episodes from this one. Both run on the CPU.
-    n_envs = cfg.rollouts_per_cycle * cfg.workers
-    spec_env = make_task_env(cfg)
-    episode_steps = spec_env.max_episode_steps
-    dims = (
-        spec_env.observation_spec["observation"].shape[-1],
-        spec_env.observation_spec["desired_goal"].shape[-1],
-        spec_env.action_spec.shape[-1],
-    )
-    new_rollouts = functools.partial(make_rollouts, cfg, dims, episode_steps)
-    rollouts = RolloutWorker(new_rollouts) if cfg.overlap_collection else new_rollouts()
-    test_env = make_batched_env(cfg, n_envs, device)
-
-    # Agent: the normaliser is shared by the policy and (outside the loss) the training batches.
-    policy, exploration_policy = make_policy(*dims, cfg.agent.hidden)
-    normalizer, actor = policy.to(device)
-    critic = make_critic(dims[0] + dims[1], dims[2], cfg.agent.hidden).to(device)
-    loss = HERDDPGLoss(actor, critic, gamma=1.0 - 1.0 / episode_steps, action_l2=cfg.agent.action_l2)
-    target_updater = SoftUpdate(loss, tau=cfg.agent.tau)
-    # Fused Adam: one kernel per step instead of a dozen per parameter group (~1 ms of 15 per update).
-    actor_optim = torch.optim.Adam(loss.actor_network_params.values(True, True), lr=cfg.agent.lr_actor, fused=True)
-    critic_optim = torch.optim.Adam(loss.value_network_params.values(True, True), lr=cfg.agent.lr_critic, fused=True)
-
-    # Replay: whole episodes as rows, the configured sampler, HER relabelling at sampling time.
-    her = HindsightRelabel(spec_env.compute_reward, future_p=cfg.replay.future_p, strategy=cfg.replay.strategy)
-    # A generator of its own for every replay draw: TorchRL's PER falls back to numpy's unseeded global RNG without one.
-    replay = make_replay_buffer(sampler, her, capacity=cfg.replay.capacity, batch_size=cfg.batch_size * cfg.workers,
-                                generator=torch.Generator().manual_seed(derive_seed(cfg.seed, 3)))
-    normalizer_feed = RelabelledTransitions(her)
-    beta_scheduler = sampler.beta_scheduler() if isinstance(sampler, PERSampler) else None
-
-    def collection_weights() -> dict[str, torch.Tensor]:
-        return {key: value.detach().cpu() for key, value in exploration_policy.state_dict().items()}
-
+    test_env = make_env(cfg, episodes_per_cycle(cfg), device)
+    dims = TaskDims.of(test_env)
+    agent = make_agent(cfg, dims, device)
+    optimizer = make_optimizer(cfg, agent.loss)
+    replay, her = make_replay(cfg, sampler, test_env)
+    learner = Learner(cfg, agent, optimizer, replay, her, sampler, device)
+    batches = make_training_collector(cfg, agent, dims)
     start_epoch, wall_before = 0, 0.0
-    if resuming:
+    if resuming:  # after every part is built: building one may draw from the restored random streams
         state = load_checkpoint(run_dir, map_location=device)
-        check_same_run(state["config"], cfg)
-        loss.load_state_dict(state["loss"])
-        normalizer.load_state_dict(state["normalizer"])
-        actor_optim.load_state_dict(state["actor_optim"])
-        critic_optim.load_state_dict(state["critic_optim"])
-        replay.load_state_dict(state["replay"])
-        if beta_scheduler is not None:
-            # Checkpoints from before the scheduler kept the draw count in PER's own state.
-            draws = state["replay"]["_sampler"].get("draws", 0)
-            beta_scheduler.load_state_dict(state.get("beta_scheduler", {**beta_scheduler.state_dict(), "_step_cnt": draws}))
-        # Restored last, so that building the agent above draws nothing from the restored stream.
-        set_rng_state(state["rng"])
-        start_epoch, wall_before = state["epoch"] + 1, state["wall_s"]
-    csv_log = EpochCsv(run_dir / CSV_NAME, start_epoch)
-    commit = code_version()
-    logger = make_logger(cfg.logger, run_dir)
+        start_epoch, wall_before = restore_training_state(state, cfg, agent, optimizer, replay, learner.beta_scheduler)
+    log = EpochLog(run_dir, start_epoch, cfg.logger)
     run_start = time.perf_counter()
 
     progress = tqdm(range(start_epoch, cfg.epochs), initial=start_epoch, total=cfg.epochs, desc="epochs")
     for epoch in progress:
         epoch_start = time.perf_counter()
-        # Each epoch starts from the current policy and reseeded env and exploration streams,
-        # so a resumed run repeats an uninterrupted one, with or without overlap.
-        rollouts.submit(collection_weights(), Seeds(derive_seed(cfg.seed, epoch, 0), derive_seed(cfg.seed, epoch, 2)))
-        totals: dict[str, torch.Tensor] = defaultdict(float)
-        collect_s = update_s = load = 0.0
-        for cycle in range(cfg.cycles_per_epoch):
-            tick = time.perf_counter()
-            episodes = rollouts.result()
-            replay.extend(episodes)
-            normalizer.update(normalizer_feed(episodes))
-            next_cycle = cycle + 1 < cfg.cycles_per_epoch
-            if cfg.overlap_collection and next_cycle:
-                # The next cycle's episodes, collected during this cycle's updates: one cycle stale.
-                rollouts.submit(collection_weights())
-            collect_s += time.perf_counter() - tick
-
-            tick = time.perf_counter()
-            for _ in range(cfg.updates_per_cycle):
-                # The collecting worker holds a core: one thread fewer until it is done, so that
-                # the two never oversubscribe the cores and the updates get them all afterwards.
-                threads = max(1, cfg.threads - 1) if rollouts.busy() else cfg.threads
-                if threads != torch.get_num_threads():
-                    torch.set_num_threads(threads)
-                batch = replay.sample().to(device)
-                if beta_scheduler is not None:
-                    beta_scheduler.step()
-                normalizer(batch)
-                normalizer(batch["next"])
-                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=use_bf16):
-                    losses = loss(batch)
-                actor_optim.zero_grad()
-                critic_optim.zero_grad()
-                (losses["loss_actor"] + losses["loss_value"]).backward()
-                actor_optim.step()
-                critic_optim.step()
-                replay.update_tensordict_priority(batch)  # a no-op unless the sampler is PER
-                for key in ("loss_actor", "loss_value", "action_l2"):
-                    totals[key] += losses[key].detach()
-                totals["q_mean"] += losses["pred_value"].mean()
-                if "priority_weight" in batch.keys():
-                    totals["is_weight_mean"] += batch["priority_weight"].mean()
-                    totals["is_weight_min"] += batch["priority_weight"].min()
-            target_updater.step()
-            update_s += time.perf_counter() - tick
-            load += os.getloadavg()[0] / cfg.cycles_per_epoch
-            if not cfg.overlap_collection and next_cycle:
-                rollouts.submit(collection_weights())
-
-        if hasattr(sampler, "refit"):
-            sampler.refit(replay.storage)
+        timings = run_epoch(cfg, epoch, learner, batches)
 
         tick = time.perf_counter()
-        test_env.set_seed(derive_seed(cfg.seed, epoch, 1))
-        success = evaluate_success_rate(test_env, policy, cfg.test_episodes * cfg.workers, episode_steps)
-        test_s = time.perf_counter() - tick
-
+        test_env.set_seed(derive_seed(cfg.seed, epoch, TEST_STREAM))
+        success = evaluate_success_rate(test_env, agent.policy, cfg.test_episodes * cfg.workers)
         epoch_s = time.perf_counter() - epoch_start
-        env_steps = cfg.cycles_per_epoch * n_envs * episode_steps
-        n_updates = cfg.cycles_per_epoch * cfg.updates_per_cycle
+        env_steps = cfg.cycles_per_epoch * episodes_per_cycle(cfg) * dims.episode_steps
         wall_s = wall_before + time.perf_counter() - run_start
-        row = {
-            "epoch": epoch,
+        log.write(epoch, {
             "test_success": success,
-            **{key: (value / n_updates).item() for key, value in totals.items()},
-            **sampling_spread(sampler),
-            "stored_episodes": len(replay.storage) // episode_steps,
+            **learner.epoch_means(),
+            "stored_episodes": len(replay.storage) // dims.episode_steps,
             "env_steps_per_s": env_steps / epoch_s,
-            "collect_s": collect_s,
-            "update_s": update_s,
-            "test_s": test_s,
+            **{key: timings[key] for key in ("collect_s", "update_s")},
+            "test_s": time.perf_counter() - tick,
             "epoch_s": epoch_s,
             "wall_s": wall_s,
             # Above the runs' own thread count, something else shared the cores and inflated epoch_s.
-            "load_avg": load,
-        }
-        csv_log.write({**row, "code_commit": commit})
-        if logger is not None:
-            for key, value in row.items():
-                logger.log_scalar(key, value, step=epoch)
-        save_checkpoint(
-            {
-                "epoch": epoch,
-                "wall_s": wall_s,
-                "config": OmegaConf.to_container(cfg, resolve=True),
-                "loss": loss.state_dict(),
-                "normalizer": normalizer.state_dict(),
-                "actor_optim": actor_optim.state_dict(),
-                "critic_optim": critic_optim.state_dict(),
-                "replay": replay.state_dict(),
-                **({"beta_scheduler": beta_scheduler.state_dict()} if beta_scheduler is not None else {}),
-                "rng": rng_state(),
-            },
-            run_dir,
-        )
+            "load_avg": timings["load_avg"],
+        })
+        save_checkpoint(training_state(epoch, wall_s, cfg, agent, optimizer, replay, learner.beta_scheduler), run_dir)
         progress.set_postfix(success=f"{success:.3f}", steps_per_s=f"{env_steps / epoch_s:.0f}")
         tqdm.write(f"epoch {epoch:3d}  test success {success:.3f}  ({env_steps / epoch_s:.0f} env steps/s)")
 
-    rollouts.close()
+    batches.close()
     test_env.close()
-    spec_env.close()
-    return run_dir / CSV_NAME
+    return log.csv_path

@@ -149,6 +149,12 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         """IS weights of the drawn episodes, or ``None`` when the method uses none."""
         return None
 
+    def refit(self, storage: Storage) -> None:
+        """Re-ranks the stored episodes from the whole ``storage``; a trainer calls it once per epoch.
+
+        Priorities fixed at write time need nothing here; a density model (MEP) refits on it.
+        """
+
     # ---- TorchRL sampler interface ----------------------------------------------
     @property
     def n_episodes(self) -> int:

@@ -1,0 +1,138 @@
+"""The trainer's parts, each built from the Hydra config (``conf/config.yaml``): env, agent, replay, collector, optimiser.
+
+Each ``make_*`` is usable on its own, e.g. to put our replay or collector into another TorchRL loop.
+"""
+
+from __future__ import annotations
+
+import copy
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from omegaconf import DictConfig
+from tensordict.nn import TensorDictSequential
+from torchrl.data import TensorDictReplayBuffer
+from torchrl.data.replay_buffers.samplers import Sampler
+from torchrl.envs import EnvBase
+from torchrl.objectives import SoftUpdate, group_optimizers
+
+from torchrl_cebp.agents import HERDDPGLoss, ObsGoalNormalizer, make_critic
+from torchrl_cebp.envs import make_env_from_config
+from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+from torchrl_cebp.training.collection import EpisodeBatches, make_collector, make_policy
+
+
+def derive_seed(*keys: int) -> int:
+    """A 31-bit seed for one stream (e.g. ``(seed, epoch, stream)``), independent of the others.
+
+    Example:
+        >>> derive_seed(0, 1) == derive_seed(0, 1) != derive_seed(0, 2)
+        True
+    """
+    return int(np.random.SeedSequence(list(keys)).generate_state(1)[0] >> 1)
+
+
+def make_env(cfg: DictConfig, n_envs: int = 1, device: torch.device | str = "cpu") -> EnvBase:
+    """``n_envs`` simulations of the configured task (``cfg.env``: task, goal space, robot) as one batched env.
+
+    Example:
+        >>> from omegaconf import OmegaConf
+        >>> make_env(OmegaConf.create({"env": {"task": "push", "goal_space": "standard"}}), 2).batch_size
+        torch.Size([2])
+    """
+    return make_env_from_config(cfg.env, device=device, num_envs=n_envs)
+
+
+@dataclass(frozen=True)
+class TaskDims:
+    """The sizes the networks are built for, and the episode length, read from an env's specs."""
+
+    observation: int
+    goal: int
+    action: int
+    episode_steps: int
+
+    @classmethod
+    def of(cls, env: EnvBase) -> TaskDims:
+        spec = env.observation_spec
+        return cls(spec["observation"].shape[-1], spec["desired_goal"].shape[-1], env.action_spec.shape[-1],
+                   env.max_episode_steps)
+
+
+@dataclass
+class Agent:
+    """DDPG+HER's modules: the deterministic ``policy`` (normaliser, actor), the ``exploration`` policy wrapping it,
+    the ``loss`` (actor, critic and their target copies) and the ``target_updater``."""
+
+    policy: TensorDictSequential
+    exploration: TensorDictSequential
+    loss: HERDDPGLoss
+    target_updater: SoftUpdate
+
+    @property
+    def normalizer(self) -> ObsGoalNormalizer:
+        return self.policy[0]
+
+
+def make_agent(cfg: DictConfig, dims: TaskDims, device: torch.device | str = "cpu") -> Agent:
+    """Actor, critic, DDPG loss with HER's discount ``1 - 1/T`` and its soft target update (``cfg.agent``).
+
+    Example:
+        >>> from omegaconf import OmegaConf
+        >>> cfg = OmegaConf.create({"agent": {"hidden": [32], "random_eps": 0.3, "noise_std": 0.2,
+        ...                                   "action_l2": 1.0, "tau": 0.05}})
+        >>> agent = make_agent(cfg, TaskDims(25, 3, 4, 50))
+        >>> round(agent.loss.gamma, 2)
+        0.98
+    """
+    agent_cfg = cfg.agent
+    policy, exploration = make_policy(
+        dims.observation, dims.goal, dims.action, list(agent_cfg.hidden),
+        random_eps=agent_cfg.random_eps, noise_std=agent_cfg.noise_std,
+    )
+    policy.to(device)
+    exploration.to(device)
+    critic = make_critic(dims.observation + dims.goal, dims.action, list(agent_cfg.hidden)).to(device)
+    loss = HERDDPGLoss(policy[1], critic, gamma=1.0 - 1.0 / dims.episode_steps, action_l2=agent_cfg.action_l2)
+    return Agent(policy, exploration, loss, SoftUpdate(loss, tau=agent_cfg.tau))
+
+
+def make_optimizer(cfg: DictConfig, loss: HERDDPGLoss) -> torch.optim.Optimizer:
+    """One Adam over the actor's and the critic's parameters, each with its learning rate (``cfg.agent``)."""
+    # Fused: one kernel per step instead of a dozen per parameter group (~1 ms of 15 per update).
+    actor = torch.optim.Adam(loss.actor_network_params.values(True, True), lr=cfg.agent.lr_actor, fused=True)
+    critic = torch.optim.Adam(loss.value_network_params.values(True, True), lr=cfg.agent.lr_critic, fused=True)
+    return group_optimizers(actor, critic)
+
+
+def make_replay(cfg: DictConfig, sampler: Sampler, env: EnvBase) -> tuple[TensorDictReplayBuffer, HindsightRelabel]:
+    """The episode replay of ``cfg.replay`` with ``sampler`` and HER relabelling against ``env``'s reward.
+
+    Its draws come from a generator of their own, seeded from ``cfg.seed``: TorchRL's PER would
+    otherwise draw from numpy's unseeded global RNG.
+    """
+    her = HindsightRelabel(env.compute_reward, future_p=cfg.replay.future_p, strategy=cfg.replay.strategy)
+    replay = make_replay_buffer(sampler, her, capacity=cfg.replay.capacity, batch_size=cfg.batch_size * cfg.workers,
+                                generator=torch.Generator().manual_seed(derive_seed(cfg.seed, 3)))
+    return replay, her
+
+
+def episodes_per_cycle(cfg: DictConfig) -> int:
+    """Episodes a cycle collects: baselines' ``rollouts_per_cycle`` per emulated worker."""
+    return cfg.rollouts_per_cycle * cfg.workers
+
+
+def collector_processes(cfg: DictConfig) -> int:
+    """Env processes of the training collector: ``cfg.collector_processes``, at least one to overlap collection."""
+    return max(cfg.collector_processes, 1) if cfg.overlap_collection else cfg.collector_processes
+
+
+def make_training_collector(cfg: DictConfig, agent: Agent, dims: TaskDims) -> EpisodeBatches:
+    """Exploration episodes of ``agent`` on CPU envs, a cycle's worth per batch (see :func:`make_collector`)."""
+    collector = make_collector(
+        functools.partial(make_env, cfg), copy.deepcopy(agent.exploration), n_envs=episodes_per_cycle(cfg),
+        episode_steps=dims.episode_steps, processes=collector_processes(cfg),
+    )
+    return EpisodeBatches(collector, agent.exploration)
