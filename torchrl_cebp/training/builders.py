@@ -84,8 +84,8 @@ def make_agent(cfg: DictConfig, dims: TaskDims, device: torch.device | str = "cp
         >>> cfg = OmegaConf.create({"agent": {"hidden": [32], "random_eps": 0.3, "noise_std": 0.2,
         ...                                   "action_l2": 1.0, "tau": 0.05}})
         >>> agent = make_agent(cfg, TaskDims(25, 3, 4, 50))
-        >>> round(agent.loss.gamma, 2)
-        0.98
+        >>> agent.policy[1] is agent.loss.actor_network  # the loss trains the policy's own actor
+        True
     """
     agent_cfg = cfg.agent
     policy, exploration = make_policy(

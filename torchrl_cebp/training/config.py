@@ -95,11 +95,6 @@ def validate_config(cfg: DictConfig) -> None:
     one_of("env.control", CONTROLS)
     for key in ("env.touch_ignores_table", "env.touch_in_observation"):
         check(key, lambda v: isinstance(v, bool), "true or false")
-    if OmegaConf.select(cfg, "env.task") == FRANKA_TASK:
-        for key, default in asdict(RobotOptions()).items():
-            if OmegaConf.select(cfg, f"env.{key}", default=default) != default:
-                errors.append(f"  env.{key}={OmegaConf.select(cfg, f'env.{key}')!r}: the Franka task has the mocap robot "
-                              f"with its own pads only; use env.{key}={default!r}")
     one_of("precision", PRECISIONS)
     one_of("logger", LOGGERS)
     one_of("replay.strategy", STRATEGIES)
@@ -112,12 +107,6 @@ def validate_config(cfg: DictConfig) -> None:
     check("resume", lambda v: isinstance(v, bool), "true or false")
     check("overlap_collection", lambda v: isinstance(v, bool), "true or false")
     check("collector_processes", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
-    processes = cfg.get("collector_processes")
-    if _is_int(processes) and processes > 0 and all(_is_int(cfg.get(k)) for k in ("rollouts_per_cycle", "workers")):
-        n_envs = cfg.rollouts_per_cycle * cfg.workers
-        if n_envs % processes:
-            errors.append(f"  collector_processes={processes}: must divide the {n_envs} episodes of a cycle "
-                          "(rollouts_per_cycle x workers) evenly")
     real_in("replay.future_p", 0.0, 1.0)
     real_in("agent.tau", 0.0, 1.0, open_low=True)
     real_in("agent.random_eps", 0.0, 1.0)
@@ -127,18 +116,42 @@ def validate_config(cfg: DictConfig) -> None:
     real_in("agent.lr_critic", 0.0, math.inf, open_low=True)
     check("agent.hidden", lambda v: v is not None and len(v) > 0 and all(_is_int(h) and h > 0 for h in v),
           "a non-empty list of positive integers")
-    steps = episode_steps(cfg)
-    if steps is not None and _is_int(OmegaConf.select(cfg, "replay.capacity")):
-        per_cycle = cfg.rollouts_per_cycle * cfg.workers * steps if _is_int(cfg.get("workers")) else None
-        if per_cycle is not None and cfg.replay.capacity < per_cycle:
-            errors.append(
-                f"  replay.capacity={cfg.replay.capacity}: smaller than one cycle's episodes; "
-                f"needs at least {per_cycle} transitions (rollouts_per_cycle x workers x {steps} steps)"
-            )
+    errors += _franka_robot_errors(cfg) + _collection_errors(cfg)
     if cfg.get("device") == "cuda" and not torch.cuda.is_available():
         errors.append("  device='cuda': CUDA is not available here; use device=auto or device=cpu")
     if errors:
         raise ConfigError("invalid config:\n" + "\n".join(errors))
+
+
+def _franka_robot_errors(cfg: DictConfig) -> list[str]:
+    if OmegaConf.select(cfg, "env.task") != FRANKA_TASK:
+        return []
+    return [
+        f"  env.{key}={OmegaConf.select(cfg, f'env.{key}')!r}: the Franka task has the mocap robot "
+        f"with its own pads only; use env.{key}={default!r}"
+        for key, default in asdict(RobotOptions()).items()
+        if OmegaConf.select(cfg, f"env.{key}", default=default) != default
+    ]
+
+
+def _collection_errors(cfg: DictConfig) -> list[str]:
+    """What a cycle's episodes must fit: the replay, and the collector's env processes."""
+    if not all(_is_int(cfg.get(key)) for key in ("rollouts_per_cycle", "workers")):
+        return []
+    errors = []
+    n_envs = cfg.rollouts_per_cycle * cfg.workers
+    steps = episode_steps(cfg)
+    capacity = OmegaConf.select(cfg, "replay.capacity")
+    if steps is not None and _is_int(capacity) and capacity < n_envs * steps:
+        errors.append(
+            f"  replay.capacity={capacity}: smaller than one cycle's episodes; "
+            f"needs at least {n_envs * steps} transitions (rollouts_per_cycle x workers x {steps} steps)"
+        )
+    processes = cfg.get("collector_processes")
+    if _is_int(processes) and processes > 0 and n_envs % processes:
+        errors.append(f"  collector_processes={processes}: must divide the {n_envs} episodes of a cycle "
+                      "(rollouts_per_cycle x workers) evenly")
+    return errors
 
 
 def episode_steps(cfg: DictConfig) -> int | None:
