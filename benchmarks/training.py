@@ -4,8 +4,8 @@ The same schedule for every method: ``cycles`` x (``2 x workers`` episodes of 50
 updates of ``256 x workers``), then ``10 x workers`` deterministic test episodes; 3 x 256 networks.
 The methods run one after another, each with the torch threads given as ``NAME:THREADS``; by
 default the peers get one thread (ANCHORS.md's setting) and two, and our trainer with
-``overlap_collection=true`` gets two, which it shares with its worker process for the simulation:
-one while the worker collects, both once it is done.
+``overlap_collection=true`` gets two, which it shares with its env process (a TorchRL collector) for the simulation:
+one while the env process collects, both once it is done.
 
   * ours: ``torchrl_cebp.training.train`` (touch-sensing FetchPush, standard goals), overlap off and on,
     and overlapped with ``precision=bf16`` (bfloat16 matrix products in the updates);
