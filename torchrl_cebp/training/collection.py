@@ -136,16 +136,16 @@ class EpisodeBatches:
         self.collector.update_policy_weights_(TensorDict.from_module(self.policy))
         self._pending = Future()
         if background:
-            threading.Thread(target=self._collect, name="episode-batches", daemon=True).start()
+            threading.Thread(target=self._collect, args=(self._pending,), name="episode-batches", daemon=True).start()
         else:
-            self._collect()
+            self._collect(self._pending)
 
-    def _collect(self) -> None:
+    def _collect(self, batch: Future) -> None:
         try:
             with torch.no_grad():
-                self._pending.set_result(next(self._iterator).exclude(*COLLECTOR_KEYS))
+                batch.set_result(next(self._iterator).exclude(*COLLECTOR_KEYS))
         except BaseException as err:  # re-raised in the trainer's thread by result()
-            self._pending.set_exception(err)
+            batch.set_exception(err)
 
     def busy(self) -> bool:
         """Whether a background batch is still being collected (its env process holds a core meanwhile)."""
