@@ -51,3 +51,15 @@ def valid_steps(lengths: torch.Tensor, row_length: int) -> torch.Tensor:
         [[1, 1, 0, 0], [1, 1, 1, 1]]
     """
     return torch.arange(row_length) < lengths.unsqueeze(-1)
+
+
+def common_length(lengths: torch.Tensor) -> int | None:
+    """The length all of ``lengths`` share, else ``None`` (also for none): draws then need no per-row lengths.
+
+    Examples:
+        >>> common_length(torch.tensor([50, 50])), common_length(torch.tensor([50, 7]))
+        (50, None)
+    """
+    if lengths.numel() == 0 or not bool((lengths == lengths[0]).all()):
+        return None
+    return int(lengths[0])

@@ -10,7 +10,7 @@ from tensordict.utils import NestedKey
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage
 
 from torchrl_cebp.replay import _upstream
-from torchrl_cebp.replay.episodes import episode_lengths
+from torchrl_cebp.replay.episodes import common_length, episode_lengths
 
 
 class _EpisodeRows:
@@ -22,7 +22,6 @@ class _EpisodeRows:
 
     end_key: NestedKey = ("next", "done")
     _lengths: torch.Tensor | None = None
-
     _common_length: int | None = None
 
     def valid_lengths(self, rows: torch.Tensor) -> torch.Tensor:
@@ -41,12 +40,8 @@ class _EpisodeRows:
     def _read_lengths_if_unknown(self) -> None:
         if self._lengths is None:  # restored from a checkpoint: read them from the flags once
             self._lengths = episode_lengths(_upstream.stored_tensordict(self), self.end_key)
-            self._track_common_length()
-
-    def _track_common_length(self) -> None:
-        # Unwritten rows hold no end flag, so they count as full rows: one check covers the filled ones.
-        shared = bool((self._lengths == self._lengths[0]).all())
-        self._common_length = int(self._lengths[0]) if shared else None
+            # Unwritten rows hold no end flag, so they count as full rows: one check covers the filled ones.
+            self._common_length = common_length(self._lengths)
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if isinstance(data, TensorDictBase):
@@ -68,7 +63,7 @@ class _EpisodeRows:
                 # self.shape counts the filled rows only; the lengths cover every row.
                 n_rows = self._lengths.numel()
                 self._lengths[torch.arange(n_rows)[cursor]] = episode_lengths(data, self.end_key)
-                self._track_common_length()
+                self._common_length = common_length(self._lengths)
 
     def state_dict(self) -> dict[str, Any]:
         """The storage's state with its filled rows only, so that a checkpoint grows with the stored episodes."""

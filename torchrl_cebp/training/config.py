@@ -14,6 +14,7 @@ from torchrl_cebp.envs import ALL_TASKS, CONTROLS, FRANKA_TASK, GOAL_SPACES, Rob
 from torchrl_cebp.envs.franka import FrankaLayout
 from torchrl_cebp.envs.goal_spaces import get_goal_space
 from torchrl_cebp.replay.her import STRATEGIES
+from torchrl_cebp.training.builders import episodes_per_cycle
 from torchrl_cebp.training.metrics import LOGGERS
 
 DEVICES = ("auto", "cpu", "cuda")
@@ -139,7 +140,7 @@ def _collection_errors(cfg: DictConfig) -> list[str]:
     if not all(_is_int(cfg.get(key)) for key in ("rollouts_per_cycle", "workers")):
         return []
     errors = []
-    n_envs = cfg.rollouts_per_cycle * cfg.workers
+    n_envs = episodes_per_cycle(cfg)
     steps = episode_steps(cfg)
     capacity = OmegaConf.select(cfg, "replay.capacity")
     if steps is not None and _is_int(capacity) and capacity < n_envs * steps:

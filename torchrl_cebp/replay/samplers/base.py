@@ -20,7 +20,7 @@ from tensordict.utils import NestedKey
 from torchrl.data.replay_buffers.samplers import Sampler, SumSegmentTreeFp64
 from torchrl.data.replay_buffers.storages import Storage
 
-from torchrl_cebp.replay.episodes import episode_lengths, valid_steps
+from torchrl_cebp.replay.episodes import common_length, episode_lengths, valid_steps
 
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
 
@@ -217,9 +217,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._track_common_length()
 
     def _track_common_length(self) -> None:
-        stored = self._lengths[: self._n_stored]
-        shared = stored.numel() > 0 and bool((stored == stored[0]).all())
-        self._common_length = int(stored[0]) if shared else None
+        self._common_length = common_length(self._lengths[: self._n_stored])
 
     def set_priorities(self, rows: torch.Tensor, priority: torch.Tensor) -> None:
         """Overwrites the priorities of ``rows`` (used on write, and by samplers that re-rank)."""
