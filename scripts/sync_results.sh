@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Copies every comparison run's progress.csv from runs/ to docs/results/comparison/ (same layout) and
-# commits them, so that finished epochs survive the session. Usage: bash scripts/sync_results.sh [--every SECONDS]
+# Copies every comparison run's progress.csv from runs/ to docs/results/comparison/ (same layout), and
+# every learning check's (benchmarks/learning.py, runs/learning/) to docs/results/learning/collectors/,
+# and commits them, so that finished epochs survive the session. Usage: bash scripts/sync_results.sh [--every SECONDS]
 set -uo pipefail
 cd "$(dirname "$0")/.."
 every=0
@@ -8,14 +9,17 @@ every=0
 sync_once() {
   local changed=0
   while IFS= read -r csv; do
-    dest="docs/results/comparison/${csv#runs/}"
+    case "$csv" in
+      runs/learning/*) dest="docs/results/learning/collectors/${csv#runs/learning/}" ;;
+      *) dest="docs/results/comparison/${csv#runs/}" ;;
+    esac
     if ! cmp -s "$csv" "$dest"; then
       mkdir -p "$(dirname "$dest")" && cp "$csv" "$dest" && changed=1
     fi
   done < <(find runs -path runs/quick -prune -o -name progress.csv -print 2>/dev/null | sort)
   if [ "$changed" = 1 ]; then
-    git add docs/results/comparison
-    git commit -q -m "Comparison: epochs finished by $(date -u +%H:%MZ)" -- docs/results/comparison \
+    git add docs/results/comparison docs/results/learning
+    git commit -q -m "Comparison: epochs finished by $(date -u +%H:%MZ)" -- docs/results/comparison docs/results/learning \
       && echo "[sync] $(date -u +%TZ) committed"
   fi
 }
