@@ -37,9 +37,13 @@ def test_the_stored_tensordict_is_what_the_storage_reads_and_writes():
 
 
 def test_an_unchecked_tensordict_equals_a_checked_one():
-    source = {"a": torch.ones(4, 2), "b": torch.zeros(4)}
-    built = _upstream.unchecked_tensordict(source, torch.Size([4]), None)
+    source = {"a": torch.ones(4, 2), "b": torch.zeros(4), "next": {"a": torch.full((4, 2), 2.0)}}
+    built = _upstream.unchecked_tensordict(source, torch.Size([4]), torch.device("cpu"))
     assert (built == TensorDict(source, [4])).all()
+    nested = built.get("next")  # the episode storage's read hands nested dicts over as they are
+    assert isinstance(nested, TensorDict) and nested.batch_size == torch.Size([4])
+    assert nested.device == torch.device("cpu")
+    assert list(built.keys(True, True)) == ["a", "b", ("next", "a")]
 
 
 def test_a_prioritized_sampler_round_trips_through_plain_tensors():

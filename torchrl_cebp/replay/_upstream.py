@@ -27,7 +27,8 @@ def unchecked_tensordict(source: dict, batch_size: torch.Size, device: torch.dev
     """A TensorDict over entries already known to fit ``batch_size``, without the per-entry checks.
 
     ``TensorDict(...)`` validates every leaf; the episode storage's fast read builds one per draw
-    from views it laid out itself, and the checks cost as much as the read.
+    from views it laid out itself, and the checks cost as much as the read. Nested dicts in
+    ``source`` become nested TensorDicts of the same batch size and device.
     """
     return TensorDict._new_unsafe(source=source, batch_size=batch_size, device=device)
 

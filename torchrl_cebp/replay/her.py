@@ -124,10 +124,10 @@ class HindsightRelabel(SampleUnit):
         uniform = torch.rand(steps.shape, generator=generator)
         if self.strategy == "episode":
             return _at_most((uniform * lengths).long(), last)
-        remaining = lengths - steps
-        # Steps past an episode's end (the normaliser feed reads whole rows) take its last goal.
-        offset = (uniform * remaining.clamp_(min=0)).long()
-        return _at_most(steps + offset, last)
+        # A step at or past its episode's end (the normaliser feed reads whole rows) has L - t <= 0, so
+        # t + offset stays >= L and the bound below gives it the episode's last goal, as a clamp of L - t at 0 would.
+        offset = uniform.mul_(lengths - steps).long()
+        return _at_most(offset.add_(steps), last)
 
     def relabel(
         self,
@@ -144,35 +144,43 @@ class HindsightRelabel(SampleUnit):
         ``end_key`` flags when omitted.
         """
         generator = self.generator if generator is None else generator
-        episode_steps = episodes.shape[1]
-        if lengths is None:
-            lengths = episode_lengths(episodes, self.end_key, rows)
-        # Flat views + index_select: much cheaper than 2-D advanced indexing.
-        next_achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1)
-        stored_goal = episodes.get(self.goal_key).flatten(0, 1)
-        first_step = rows * episode_steps
-        relabel = torch.rand(steps.shape, generator=generator) < self.future_p
-        goal_steps = self.goal_steps(steps, lengths, generator)
-        goal = torch.where(
-            relabel.unsqueeze(-1),
-            next_achieved.index_select(0, first_step + goal_steps),
-            stored_goal.index_select(0, first_step + steps),
-        )
+        relabel, candidate = self._draw(episodes, rows, steps, generator, lengths)
+        flat = torch.add(steps, rows, alpha=episodes.shape[1])
+        stored_goal = episodes.get(self.goal_key).flatten(0, 1).index_select(0, flat)
+        achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1).index_select(0, flat)
+        goal = torch.where(relabel.unsqueeze(-1), candidate, stored_goal)
         entries: dict[NestedKey, torch.Tensor] = {
             self.goal_key: goal,
             self.next_goal_key: goal,
-            self.reward_key: self.reward_fn(next_achieved.index_select(0, first_step + steps), goal),
+            self.reward_key: self.reward_fn(achieved, goal),
         }
         if self.relabelled_key is not None:
             entries[self.relabelled_key] = relabel
         return entries
 
+    def _draw(
+        self,
+        episodes: TensorDictBase,
+        rows: torch.Tensor,
+        steps: torch.Tensor,
+        generator: torch.Generator | None,
+        lengths: torch.Tensor | int | None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The coin of each transition and the achieved goal it takes if the coin says relabel."""
+        if lengths is None:
+            lengths = episode_lengths(episodes, self.end_key, rows)
+        relabel = torch.rand(steps.shape, generator=generator) < self.future_p
+        goal_steps = self.goal_steps(steps, lengths, generator)
+        # A flat view + index_select: much cheaper than 2-D advanced indexing.
+        next_achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1)
+        return relabel, next_achieved.index_select(0, goal_steps.add_(rows, alpha=episodes.shape[1]))
+
     # ---- the two hooks of a TorchRL buffer -----------------------------------------
     def expand(
         self, index: torch.Tensor | tuple, info: dict[str, Any], storage: Storage
     ) -> tuple[torch.Tensor | tuple, dict[str, Any]]:
-        if getattr(self._pending, "entries", None) is not None:
-            self._pending.entries = None
+        if getattr(self._pending, "draw", None) is not None:
+            self._pending.draw = None
             raise RuntimeError(
                 "HindsightRelabel's previous draw was never written into its batch: give the buffer "
                 "the same instance as collate_fn too, e.g. TensorDictReplayBuffer(sample_unit=her, "
@@ -185,23 +193,31 @@ class HindsightRelabel(SampleUnit):
             lengths = storage.common_length()
             if lengths is None:
                 lengths = storage.valid_lengths(rows)
-        entries = self.relabel(_upstream.stored_tensordict(storage), rows, steps, generator, lengths)
+        relabel, candidate = self._draw(_upstream.stored_tensordict(storage), rows, steps, generator, lengths)
         if self.relabelled_key is not None:
-            info[self.relabelled_key] = entries.pop(self.relabelled_key)
-        self._pending.entries = entries
+            info[self.relabelled_key] = relabel
+        self._pending.draw = relabel, candidate
         return index, info
 
     def collate(self, data: TensorDictBase) -> TensorDictBase:
-        """The buffer's ``collate_fn``: writes the goals and rewards of the last :meth:`expand` into ``data``."""
-        entries = getattr(self._pending, "entries", None)
-        if entries is None:
+        """The buffer's ``collate_fn``: writes the goals and rewards of the last :meth:`expand` into ``data``.
+
+        ``data`` is what the storage read at the drawn ``(episode, step)`` pairs, so its own entries
+        are the stored goal and achieved goal of each transition: :meth:`relabel`'s second and third
+        reads of the storage are not needed here.
+        """
+        draw = getattr(self._pending, "draw", None)
+        if draw is None:
             raise RuntimeError(
                 "HindsightRelabel.collate ran without a draw: give the buffer the same instance as "
                 "sample_unit too"
             )
-        self._pending.entries = None
-        for key, value in entries.items():
-            data.set(key, value)
+        self._pending.draw = None
+        relabel, candidate = draw
+        goal = torch.where(relabel.unsqueeze(-1), candidate, data.get(self.goal_key))
+        data.set(self.goal_key, goal)
+        data.set(self.next_goal_key, goal)
+        data.set(self.reward_key, self.reward_fn(data.get(self.next_achieved_goal_key), goal))
         return data
 
     def __repr__(self) -> str:
