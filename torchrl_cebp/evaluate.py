@@ -1,8 +1,9 @@
-"""Evaluate a training checkpoint: success rate over N deterministic episodes, and a video of a few.
+"""Evaluate a trained policy: success rate over N deterministic episodes, and a video of a few.
 
     python -m torchrl_cebp.evaluate runs/push-standard/cebp/default/seed0 --episodes 50 --video push.mp4
 
-The env (task and goal space) comes from the checkpoint's config; ``--video`` writes an MP4 or a
+The policy is a run directory, its checkpoint.pt, or a policy file (policy.pt). The env (task and
+goal space) comes from the file's config; ``--video`` writes an MP4 or a
 GIF (by extension) rendered offscreen (``MUJOCO_GL=osmesa`` on a CPU-only machine).
 """
 from __future__ import annotations
@@ -14,17 +15,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from torchrl_cebp.training.checkpoint import CHECKPOINT_NAME
+from torchrl_cebp.training.checkpoint import read_policy_state
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
 
 def _checkpoint_env(checkpoint: Path, **kwargs):
-    """The env the checkpoint's run trained on (task, goal space, robot); ``kwargs`` go to ``make_env``."""
+    """The env the policy's run trained on (task, goal space, robot); ``kwargs`` go to ``make_env``."""
     from torchrl_cebp.envs import make_env_from_config
 
-    path = checkpoint / CHECKPOINT_NAME if checkpoint.is_dir() else checkpoint
-    return make_env_from_config(torch.load(path, map_location="cpu", weights_only=True)["config"]["env"], **kwargs)
+    return make_env_from_config(read_policy_state(checkpoint)["env"], **kwargs)
 
 
 def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -> float:
@@ -56,13 +56,16 @@ def record_video(
     policy = load_policy(checkpoint)
     env = _checkpoint_env(Path(checkpoint), seed=seed, render_size=size)
     frames = []
-    for _ in range(episodes):
-        td = env.reset()
-        frames.append(env.render())
-        for _ in range(env.max_episode_steps):
-            td = env.step(policy(td))
+    try:
+        for _ in range(episodes):
+            td = env.reset()
             frames.append(env.render())
-            td = td["next"].exclude("reward", "done", "terminated", "truncated")
+            for _ in range(env.max_episode_steps):
+                td = env.step(policy(td))
+                frames.append(env.render())
+                td = td["next"].exclude("reward", "done", "terminated", "truncated")
+    finally:
+        env.close()
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix == ".gif":
         iio.imwrite(path, np.stack(frames), duration=1000 / fps, loop=0)
@@ -74,7 +77,7 @@ def record_video(
 def main(argv: list[str] | None = None) -> None:
     os.environ.setdefault("MUJOCO_GL", "osmesa")
     parser = argparse.ArgumentParser(description="Success rate of a checkpoint, and a video of a few episodes.")
-    parser.add_argument("checkpoint", help="a run directory or its checkpoint.pt")
+    parser.add_argument("checkpoint", help="a run directory, its checkpoint.pt, or a policy file (policy.pt)")
     parser.add_argument("--episodes", type=int, default=10, help="test episodes for the success rate")
     parser.add_argument("--video", help="write a video of a few episodes here (.mp4 or .gif)")
     parser.add_argument("--video-episodes", type=int, default=2)

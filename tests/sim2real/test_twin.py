@@ -211,3 +211,23 @@ def test_closed_loop_runs_a_trained_checkpoint_end_to_end(tmp_path, capsys):
     train(config("env=franka_pick_place", "sampler=cebp", "epochs=1", "cycles_per_epoch=1"), tmp_path)
     assert main(["run", f"checkpoint={tmp_path}", "backend=sim", "episodes=1"]) == 0
     assert "success rate" in capsys.readouterr().out
+
+
+def test_twin_camera_survives_another_render_context_freed_after_it():
+    # A MuJoCo render context's destructor frees its GL objects by id in whichever context is current:
+    # an unreachable Fetch renderer collected after the twin's camera rendered used to wipe its textures.
+    import gc
+
+    from torchrl_cebp.envs import make_env_from_config
+
+    other = make_env_from_config({"task": "push", "goal_space": "standard"}, seed=0, render_size=(64, 48))
+    other.reset()
+    other.render()
+    del other  # unreachable, but held by reference cycles until the next collection
+    backend = MuJoCoTwinBackend(seed=0)
+    camera = TwinCamera(backend)
+    backend.reset()
+    first = camera.read()
+    gc.collect()
+    np.testing.assert_array_equal(camera.read(), first)
+    camera.close()

@@ -16,7 +16,7 @@ from torchrl_cebp.replay import HindsightRelabel
 from torchrl_cebp.training import ConfigError, load_checkpoint, load_policy, train, validate_config
 from torchrl_cebp.training.config import env_label, warn_if_bf16_is_emulated
 from torchrl_cebp.training.builders import TaskDims, derive_seed, make_agent, make_env, make_replay, make_training_collector
-from torchrl_cebp.training.checkpoint import CHECKPOINT_NAME
+from torchrl_cebp.training.checkpoint import CHECKPOINT_NAME, POLICY_NAME
 from torchrl_cebp.training.evaluation import evaluate_success_rate
 from torchrl_cebp.training.trainer import TEST_STREAM, RelabelledTransitions
 
@@ -57,6 +57,19 @@ def test_tiny_run_writes_csv_and_checkpoint(tmp_path, sampler):
     test_env = make_env(cfg, cfg.rollouts_per_cycle)
     test_env.set_seed(derive_seed(cfg.seed, 1, TEST_STREAM))
     assert float(log[-1]["test_success"]) == evaluate_success_rate(test_env, load_policy(tmp_path), cfg.test_episodes)
+
+
+def test_policy_file_is_small_and_acts_as_the_checkpoint(tmp_path):
+    train(config("sampler=her", "env=pick_place", "epochs=1", "agent.hidden=[256,256,256]"), tmp_path)
+    policy_file = tmp_path / POLICY_NAME
+    assert policy_file.stat().st_size < 1_000_000  # the paper's 3x256 actor and the normaliser, no replay
+    state = torch.load(policy_file, weights_only=True)
+    assert set(state) == {"format", "env", "hidden", "actor", "normalizer"} and state["env"]["task"] == "pick_place"
+    observations = TensorDict(observation=torch.randn(8, 25), desired_goal=torch.randn(8, 3), batch_size=[8])
+    from_file, from_checkpoint = load_policy(policy_file), load_policy(tmp_path / CHECKPOINT_NAME)
+    actions = from_file(observations.clone())["action"]
+    torch.testing.assert_close(actions, from_checkpoint(observations.clone())["action"], rtol=0, atol=0)
+    assert not torch.allclose(actions, actions[:1])  # a trained, input-dependent actor, not a constant
 
 
 LEARNING_COLUMNS = ("test_success", "loss_actor", "loss_value", "q_mean", "is_weight_mean", "priority_ess_fraction")

@@ -7,6 +7,7 @@ images go through.
 
 from __future__ import annotations
 
+import gc
 import os
 import tempfile
 from pathlib import Path
@@ -212,6 +213,11 @@ class TwinCamera(FrameSource):
         super().__init__(expected_size=backend.scene.image_size)
         self.backend = backend
         height, width = backend.scene.image_size
+        # MuJoCo's render context frees its GL objects by id in whichever GL context is current when it is
+        # destroyed. One left unreachable in a reference cycle (a closed or dropped gymnasium env's
+        # renderer) and collected after this camera rendered wipes this camera's textures: collect such
+        # garbage before this camera's context exists.
+        gc.collect()
         self._renderer = mujoco.Renderer(backend.env.model, height, width)
         self.lost = False  # set to simulate an unplugged camera
 

@@ -1,4 +1,8 @@
-"""Checkpoints of plain tensors and dicts (loadable with ``weights_only=True``), written atomically."""
+"""Checkpoints and policy files: plain tensors and dicts (loadable with ``weights_only=True``), written atomically.
+
+A run directory holds ``checkpoint.pt`` (everything a resumed run needs, replay buffer included) and
+``policy.pt`` (what acting needs: the actor and the observation normaliser, a few hundred KB).
+"""
 
 from __future__ import annotations
 
@@ -17,6 +21,8 @@ from torchrl_cebp.training.builders import Agent
 from torchrl_cebp.training.config import ConfigError, check_same_run
 
 CHECKPOINT_NAME = "checkpoint.pt"
+POLICY_NAME = "policy.pt"
+POLICY_FORMAT = "torchrl_cebp.policy/1"
 # 2: episodes from TorchRL collectors, one optimiser over actor and critic. Runs of format 1 (a hand-written
 # rollout worker) cannot be continued by this trainer: their exploration streams differ.
 CHECKPOINT_FORMAT = 2
@@ -34,7 +40,10 @@ def save_checkpoint(state: dict[str, Any], run_dir: str | Path) -> Path:
         ...     load_checkpoint(d)["epoch"]
         3
     """
-    path = Path(run_dir) / CHECKPOINT_NAME
+    return _save_atomically(state, Path(run_dir) / CHECKPOINT_NAME)
+
+
+def _save_atomically(state: dict[str, Any], path: Path) -> Path:
     tmp = path.with_suffix(".tmp")
     torch.save(state, tmp)
     os.replace(tmp, path)
@@ -92,6 +101,9 @@ def restore_training_state(
     return state["epoch"] + 1, state["wall_s"]
 
 
+_ACTOR_PREFIX = "actor_network_params."
+
+
 def rng_state() -> dict[str, Any]:
     """The torch RNG states (CPU and, when present, CUDA): the samplers, HER and exploration draw from them."""
     state = {"torch": torch.get_rng_state()}
@@ -106,37 +118,82 @@ def set_rng_state(state: dict[str, Any]) -> None:
         torch.cuda.set_rng_state_all(state["cuda"])
 
 
-_ACTOR_PREFIX = "actor_network_params."
+def policy_state(cfg: DictConfig, agent: Agent) -> dict[str, Any]:
+    """What acting needs, as plain tensors: the actor, the observation normaliser, the hidden sizes and the env config.
+
+    Example:
+        >>> from omegaconf import OmegaConf
+        >>> from torchrl_cebp.training.builders import TaskDims, make_agent
+        >>> cfg = OmegaConf.create({"env": {"task": "push"}, "agent": {"hidden": [32], "random_eps": 0.3,
+        ...                         "noise_std": 0.2, "action_l2": 1.0, "tau": 0.05}})
+        >>> sorted(policy_state(cfg, make_agent(cfg, TaskDims(25, 3, 4, 50))))
+        ['actor', 'env', 'format', 'hidden', 'normalizer']
+    """
+    return {
+        "format": POLICY_FORMAT,
+        "env": OmegaConf.to_container(cfg.env, resolve=True),
+        "hidden": list(cfg.agent.hidden),
+        "actor": agent.policy[1].state_dict(),
+        "normalizer": agent.normalizer.state_dict(),
+    }
 
 
-def load_policy(checkpoint: str | Path) -> TensorDictSequential:
-    """The deterministic policy (normaliser, then actor) of a checkpoint written by ``torchrl_cebp.training``.
+def save_policy(state: dict[str, Any], path: str | Path) -> Path:
+    """Writes a :func:`policy_state` to ``path`` (a run directory gets ``policy.pt``), atomically."""
+    path = Path(path)
+    return _save_atomically(state, path / POLICY_NAME if path.is_dir() else path)
 
-    ``checkpoint`` is the ``checkpoint.pt`` file or the run directory holding it. The actor's weights
-    are the loss's ``actor_network_params`` (not the delayed target copy); its hidden sizes come
-    from the checkpoint's config, the observation, goal and action sizes from the saved tensors
+
+def read_policy_state(source: str | Path) -> dict[str, Any]:
+    """The :func:`policy_state` of a run directory, its ``checkpoint.pt``, or a policy file, read with ``weights_only=True``.
+
+    A run directory is read from its ``policy.pt`` when it has one (runs before that file: from the checkpoint).
+    """
+    path = Path(source)
+    if path.is_dir():
+        path = path / POLICY_NAME if (path / POLICY_NAME).is_file() else path / CHECKPOINT_NAME
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"No policy at {str(path)!r} (expected a run directory, its {CHECKPOINT_NAME}, or a {POLICY_NAME} file)."
+        )
+    state = torch.load(path, map_location="cpu", weights_only=True)
+    if state.get("format") == POLICY_FORMAT:
+        return state
+    missing = {"config", "loss", "normalizer"} - set(state)
+    if missing:
+        raise ValueError(f"{str(path)!r} is neither a policy file nor a training checkpoint: it lacks {sorted(missing)}.")
+    # The loss trains the policy's actor through its functional copy: those are the actor's weights (not the target's).
+    actor = {key.removeprefix(_ACTOR_PREFIX): value for key, value in state["loss"].items() if key.startswith(_ACTOR_PREFIX)}
+    return {
+        "format": POLICY_FORMAT, "env": state["config"].get("env", {}), "hidden": state["config"]["agent"]["hidden"],
+        "actor": actor, "normalizer": state["normalizer"],
+    }
+
+
+def load_policy(source: str | Path) -> TensorDictSequential:
+    """The deterministic policy (normaliser, then actor) of a run directory, its ``checkpoint.pt``, or a policy file.
+
+    The hidden sizes come from the file, the observation, goal and action sizes from the saved tensors
     (the joint robot acts in 7 or 8 dimensions, and observes touch on some tasks).
 
     Example:
-        >>> policy = load_policy("runs/franka_pick_place-standard/cebp/default/seed0")  # doctest: +SKIP
-        >>> policy(env.reset())["action"]  # doctest: +SKIP
+        >>> import tempfile
+        >>> from omegaconf import OmegaConf
+        >>> from tensordict import TensorDict
+        >>> from torchrl_cebp.training.builders import TaskDims, make_agent
+        >>> cfg = OmegaConf.create({"env": {"task": "push"}, "agent": {"hidden": [32], "random_eps": 0.3,
+        ...                         "noise_std": 0.2, "action_l2": 1.0, "tau": 0.05}})
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     path = save_policy(policy_state(cfg, make_agent(cfg, TaskDims(25, 3, 4, 50))), d)
+        ...     policy = load_policy(path)
+        >>> policy(TensorDict(observation=torch.zeros(25), desired_goal=torch.zeros(3)))["action"].shape
+        torch.Size([4])
     """
-    path = Path(checkpoint)
-    if path.is_dir():
-        path = path / CHECKPOINT_NAME
-    if not path.is_file():
-        raise FileNotFoundError(f"No checkpoint at {str(path)!r} (expected a {CHECKPOINT_NAME} or a run directory).")
-    state = torch.load(path, map_location="cpu", weights_only=True)
-    missing = {"config", "loss", "normalizer"} - set(state)
-    if missing:
-        raise ValueError(f"{str(path)!r} is not a training checkpoint: it lacks {sorted(missing)}.")
-    actor_state = {
-        key.removeprefix(_ACTOR_PREFIX): value for key, value in state["loss"].items() if key.startswith(_ACTOR_PREFIX)
-    }
-    weights = [value for key, value in actor_state.items() if key.endswith("weight")]
+    state = read_policy_state(source)
+    weights = [value for key, value in state["actor"].items() if key.endswith("weight")]
     obs_dim, goal_dim = state["normalizer"]["obs.sum"].numel(), state["normalizer"]["goal.sum"].numel()
     normalizer = ObsGoalNormalizer(obs_dim, goal_dim)
     normalizer.load_state_dict(state["normalizer"])
-    actor = make_actor(obs_dim + goal_dim, weights[-1].shape[0], state["config"]["agent"]["hidden"])
-    actor.load_state_dict(actor_state)
+    actor = make_actor(obs_dim + goal_dim, weights[-1].shape[0], state["hidden"])
+    actor.load_state_dict(state["actor"])
     return TensorDictSequential(normalizer, actor).eval()

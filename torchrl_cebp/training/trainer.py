@@ -38,8 +38,10 @@ from torchrl_cebp.training.builders import (
 from torchrl_cebp.training.checkpoint import (
     has_checkpoint,
     load_checkpoint,
+    policy_state,
     restore_training_state,
     save_checkpoint,
+    save_policy,
     training_state,
 )
 from torchrl_cebp.training.collection import EpisodeBatches
@@ -181,7 +183,7 @@ def prepare_run_dir(cfg: DictConfig, run_dir: str | Path) -> tuple[Path, bool]:
 def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     """Trains DDPG+HER as configured by ``cfg`` (see ``conf/config.yaml``); returns the CSV path.
 
-    ``run_dir`` receives ``progress.csv`` (one row per epoch) and ``checkpoint.pt``
+    ``run_dir`` receives ``progress.csv`` (one row per epoch), ``checkpoint.pt`` and ``policy.pt``
     (after each epoch). With ``cfg.resume`` the run continues after the checkpoint's epoch.
     """
     validate_config(cfg)
@@ -230,6 +232,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
             "load_avg": timings["load_avg"],
         })
         save_checkpoint(training_state(epoch, wall_s, cfg, agent, optimizer, replay, learner.beta_scheduler), run_dir)
+        save_policy(policy_state(cfg, agent), run_dir)
         progress.set_postfix(success=f"{success:.3f}", steps_per_s=f"{env_steps / epoch_s:.0f}")
         tqdm.write(f"epoch {epoch:3d}  test success {success:.3f}  ({env_steps / epoch_s:.0f} env steps/s)")
 
