@@ -46,13 +46,9 @@ def record_video(
     fps: int = 25,
 ) -> Path:
     """Renders ``episodes`` deterministic episodes to ``path`` (``.mp4`` or ``.gif``)."""
-    import imageio.v3 as iio
-
     from torchrl_cebp.training import load_policy
 
-    path = Path(path)
-    if path.suffix not in VIDEO_SUFFIXES:
-        raise ValueError(f"video {str(path)!r}: unknown format {path.suffix!r}; valid: {list(VIDEO_SUFFIXES)}")
+    path = video_path(path)
     policy = load_policy(checkpoint)
     env = _checkpoint_env(Path(checkpoint), seed=seed, render_size=size)
     frames = []
@@ -66,11 +62,35 @@ def record_video(
                 td = td["next"].exclude("reward", "done", "terminated", "truncated")
     finally:
         env.close()
+    return write_video(frames, path, fps)
+
+
+def video_path(path: str | Path) -> Path:
+    """``path`` as a Path, after checking that its extension is a video format :func:`write_video` writes."""
+    path = Path(path)
+    if path.suffix not in VIDEO_SUFFIXES:
+        raise ValueError(f"video {str(path)!r}: unknown format {path.suffix!r}; valid: {list(VIDEO_SUFFIXES)}")
+    return path
+
+
+def write_video(frames: list[np.ndarray], path: str | Path, fps: int = 25) -> Path:
+    """Writes RGB frames ``[H, W, 3]`` to ``path``: an H.264 MP4 or a looping GIF, by its extension.
+
+    Example:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     write_video([np.zeros((48, 64, 3), np.uint8)] * 5, Path(d) / "black.gif").suffix
+        '.gif'
+    """
+    import imageio.v3 as iio
+
+    path = video_path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix == ".gif":
         iio.imwrite(path, np.stack(frames), duration=1000 / fps, loop=0)
     else:
-        iio.imwrite(path, np.stack(frames), fps=fps, codec="libx264")
+        # yuv420p needs even sides, nothing more: the writer's default 16-pixel blocks would rescale 360 rows to 368.
+        iio.imwrite(path, np.stack(frames), fps=fps, codec="libx264", macro_block_size=2)
     return path
 
 

@@ -21,7 +21,7 @@ from torchrl_cebp.sim2real import (
     TwinCamera,
     Workspace,
 )
-from torchrl_cebp.sim2real.__main__ import main, parse_args
+from torchrl_cebp.sim2real.__main__ import main, parse_args, run
 from torchrl_cebp.training import load_policy
 
 
@@ -231,3 +231,47 @@ def test_twin_camera_survives_another_render_context_freed_after_it():
     gc.collect()
     np.testing.assert_array_equal(camera.read(), first)
     camera.close()
+
+
+def test_compare_sim_replays_the_loops_cube_placements_and_goals(monkeypatch, capsys):
+    placements, goals = [], []
+    reset, simulate = MuJoCoTwinBackend.reset, MuJoCoTwinBackend.simulate
+
+    def recording_reset(self):
+        reset(self)
+        placements.append((id(self), self.cube_position()))
+
+    def recording_simulate(self, policy, goal):
+        goals.append(np.asarray(goal).copy())
+        return simulate(self, policy, goal)
+
+    monkeypatch.setattr(MuJoCoTwinBackend, "reset", recording_reset)
+    monkeypatch.setattr(MuJoCoTwinBackend, "simulate", recording_simulate)
+    report = run({**parse_args(["run", "policy=scripted", "episodes=2", "seed=5", "compare_sim=true"])[1]})
+    loop_backend, truth_backend = placements[0][0], placements[1][0]
+    loop_cubes = [cube for owner, cube in placements if owner == loop_backend]
+    truth_cubes = [cube for owner, cube in placements if owner == truth_backend]
+    assert len(loop_cubes) == len(truth_cubes) == 2 and truth_backend != loop_backend
+    for loop_cube, truth_cube in zip(loop_cubes, truth_cubes):
+        np.testing.assert_array_equal(loop_cube, truth_cube)
+    assert not np.array_equal(loop_cubes[0], loop_cubes[1])  # the stream moves on between episodes
+    assert goals[0].tolist() != goals[1].tolist()
+    assert report["simulation_success"] in (0.0, 0.5, 1.0) and report["steps"] == 200
+    assert "(plain simulation)" in capsys.readouterr().out
+
+
+def test_compare_sim_needs_the_twin(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        parse_args(["run", "policy=scripted", "backend=franky", "host=1.2.3.4", "compare_sim=true"])
+    assert exit_info.value.code == 2 and "compare_sim=true needs backend=sim" in capsys.readouterr().err
+
+
+def test_debug_writes_the_annotated_frames_as_an_mp4(tmp_path):
+    import imageio.v3 as iio
+
+    assert main(["debug", f"out={tmp_path}", "steps=4", f"video={tmp_path / 'episode.mp4'}"]) == 0
+    frames = iio.imread(tmp_path / "episode.mp4")
+    assert frames.shape[0] == 4 and frames.shape[-1] == 3
+    first = cv2.cvtColor(cv2.imread(str(tmp_path / "frame_0000.png")), cv2.COLOR_BGR2RGB)
+    assert np.abs(frames[0, : first.shape[0]].astype(int) - first).mean() < 8  # the same picture, through H.264
+    assert main(["debug", f"out={tmp_path / 'x'}", "video=episode.avi"]) == 2

@@ -4,7 +4,8 @@
     python -m torchrl_cebp.sim2real run checkpoint=runs/.../seed0 backend=sim episodes=20
     python -m torchrl_cebp.sim2real calibrate backend=sim out=table.yaml
     python -m torchrl_cebp.sim2real calibrate backend=franky host=172.16.0.2 out=table.yaml
-    python -m torchrl_cebp.sim2real debug out=debug_frames steps=40
+    python -m torchrl_cebp.sim2real run checkpoint=POLICY backend=sim episodes=50 compare_sim=true   # beside plain simulation
+    python -m torchrl_cebp.sim2real debug out=debug_frames steps=40 video=episode.mp4
     python -m torchrl_cebp.sim2real perceive frames=debug_frames/raw out=annotated/   # camera only (calibration=FILE)
 
 On hardware (``backend=franky``) ``calibration=`` names the file ``calibrate`` wrote and ``camera=`` the
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -22,15 +24,17 @@ from typing import Any
 import cv2
 import numpy as np
 import torch
+from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs.utils import step_mdp
 
 from torchrl_cebp.sim2real.calibration import TableCalibration
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource, ImageFolderCamera, OpenCVCamera
-from torchrl_cebp.sim2real.perception import CubeLocator, CubePerception, draw_perception
+from torchrl_cebp.sim2real.perception import CubeLocator, CubePerception, PerceptionStatus, draw_perception
 from torchrl_cebp.sim2real.policy import ScriptedPickPlace
 from torchrl_cebp.sim2real.real_loop import ParallaxCorrection, RealLoopEnv, SafetyStatus
 from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend
+from torchrl_cebp.evaluate import video_path, write_video
 from torchrl_cebp.training import load_policy
 
 _BACKENDS = ("sim", "franky")
@@ -43,12 +47,23 @@ def _floats(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
 
 
+def _boolean(text: str) -> bool:
+    if text.lower() in ("true", "1", "yes"):
+        return True
+    if text.lower() in ("false", "0", "no"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
+
+
 # One table of options; each command takes the ones it names. (flags, argparse keyword arguments)
 _OPTIONS: dict[str, dict[str, Any]] = {
     "backend": {"choices": _BACKENDS, "default": "sim", "help": "sim: the MuJoCo twin; franky: a real Franka"},
     "policy": {"choices": ("checkpoint", "scripted"), "default": "checkpoint", "help": "what acts"},
     "checkpoint": {"default": "", "help": "a training run directory, its checkpoint.pt, or a policy file"},
     "episodes": {"type": int, "default": 5, "help": "episodes to run"},
+    "compare_sim": {"type": _boolean, "default": False, "metavar": "BOOL",
+                    "help": "also run each episode in plain simulation (true state, no camera) on the same cube and goal"},
+    "video": {"default": "", "help": "also write the annotated frames as this MP4 file"},
     "seed": {"type": int, "default": 0, "help": "the twin's (and goals') seed"},
     "calibration": {"default": "", "help": "the table calibration file (calibrate writes it; the twin's by default)"},
     "host": {"default": "", "help": "the robot's address (backend=franky)"},
@@ -62,8 +77,8 @@ _OPTIONS: dict[str, dict[str, Any]] = {
 }
 _LOOP = ("backend", "policy", "checkpoint", "seed", "calibration", "host", "camera", "camera_position", "goal")
 _COMMANDS: dict[str, tuple[str, tuple[str, ...], dict[str, Any]]] = {
-    "run": ("run a policy through camera, perception and robot", (*_LOOP, "episodes"), {}),
-    "debug": ("one episode, every frame annotated with what the perception saw", (*_LOOP, "out", "steps"),
+    "run": ("run a policy through camera, perception and robot", (*_LOOP, "episodes", "compare_sim"), {}),
+    "debug": ("one episode, every frame annotated with what the perception saw", (*_LOOP, "out", "steps", "video"),
               {"policy": "scripted"}),
     "calibrate": ("write the table calibration (marker positions in the robot frame)", ("backend", "out", "host", "ids"),
                   {}),
@@ -116,6 +131,8 @@ def parse_args(argv: Sequence[str]) -> tuple[str, dict[str, Any]]:
         parser.error("give checkpoint=PATH (a training run directory or checkpoint.pt), or policy=scripted")
     if options.get("backend") == "franky" and not options["host"]:
         parser.error("backend=franky needs host=ROBOT_IP")
+    if options.get("compare_sim") and options["backend"] != "sim":
+        parser.error("compare_sim=true needs backend=sim: only the twin has a plain simulation to compare with")
     return command, options
 
 
@@ -149,27 +166,74 @@ def _policy(options: dict[str, Any]) -> TensorDictModuleBase:
     return ScriptedPickPlace() if options["policy"] == "scripted" else load_policy(options["checkpoint"])
 
 
+def held_steps(td: TensorDictBase) -> Counter[str]:
+    """Why the steps of a loop rollout that did not move the robot held it: ``{reason: steps}``.
+
+    A step holds when the observation its action came from was not perceived (``"markers"``, ``"cube"``)
+    or the action was not finite (``"invalid_action"``); a lost camera (``"camera_lost"``) stops the robot.
+
+    Example:
+        >>> td = TensorDict({"perception_ok": torch.tensor([[True], [False]]), "perception_status": torch.tensor([[0], [2]]),
+        ...                  "next": {"safety_status": torch.tensor([[0], [2]])}}, [2])
+        >>> held_steps(td)
+        Counter({'cube': 1})
+    """
+    reasons: Counter[str] = Counter()
+    for perceived, status, outcome in zip(
+        td["perception_ok"].flatten().tolist(), td["perception_status"].flatten().tolist(),
+        td["next", "safety_status"].flatten().tolist(),
+    ):
+        if not perceived:
+            reasons[PerceptionStatus(status).reason] += 1
+        elif outcome in (SafetyStatus.INVALID_ACTION, SafetyStatus.CAMERA_LOST):
+            reasons[SafetyStatus(outcome).reason] += 1
+    return reasons
+
+
 @torch.no_grad()
-def run(options: dict[str, Any]) -> float:
-    """Runs ``episodes`` episodes; prints each one's outcome and returns the success rate."""
+def run(options: dict[str, Any]) -> dict[str, Any]:
+    """Runs ``episodes`` episodes through the loop; prints each one's outcome and a summary, and returns it.
+
+    With ``compare_sim`` each episode is replayed in plain simulation (true state, no camera) on the
+    same cube placement and goal: the summary then sets the loop's success rate beside the simulation's.
+    """
     env, backend, camera = build_loop(options)
     policy = _policy(options)
-    successes = 0
+    truth = None
+    if options["compare_sim"]:  # backend=sim: parse_args checked it
+        from torchrl_cebp.sim2real.twin import MuJoCoTwinBackend
+
+        truth = MuJoCoTwinBackend(seed=options["seed"])
+    loop_successes, sim_successes, held, steps = 0, 0, Counter(), 0
     for episode in range(options["episodes"]):
         td = env.rollout(env.max_episode_steps, policy, break_when_any_done=True)
-        last = td["next"][-1]
-        success = bool(last["is_success"])
-        successes += success
-        reasons = {SafetyStatus(int(s)).reason for s in td["next", "safety_status"].flatten()} - {"ok"}
-        line = f"episode {episode}: success={success} steps={td.shape[0]} holds/stops={sorted(reasons) or 'none'}"
+        success = bool(td["next", "is_success"][-1])
+        loop_successes += success
+        episode_held = held_steps(td)
+        held, steps = held + episode_held, steps + td.shape[0]
+        line = f"episode {episode}: success={success} steps={td.shape[0]} held={dict(episode_held) or 0}"
         if hasattr(backend, "cube_position"):
             error = np.linalg.norm(backend.cube_position() - td["desired_goal"][-1].numpy())
             line += f" true_goal_distance={error:.3f} m"
-        print(line)
+        if truth is not None:
+            sim_success = truth.simulate(policy, td["desired_goal"][0].numpy())
+            sim_successes += sim_success
+            line += f" simulation_success={sim_success}"
+        print(line, flush=True)
     camera.close()
-    rate = successes / max(options["episodes"], 1)
-    print(f"success rate {rate:.2f} over {options['episodes']} episodes")
-    return rate
+    episodes = max(options["episodes"], 1)
+    report = {
+        "episodes": options["episodes"],
+        "camera_loop_success": loop_successes / episodes,
+        "simulation_success": None if truth is None else sim_successes / episodes,
+        "steps": steps,
+        "held_steps": dict(held),
+    }
+    print(f"success rate {report['camera_loop_success']:.2f} over {options['episodes']} episodes (camera loop)")
+    if truth is not None:
+        print(f"success rate {report['simulation_success']:.2f} over the same cube placements and goals (plain simulation)")
+    print(f"held {sum(held.values())} of {steps} steps: {dict(held) or 'none'}")
+    return report
 
 
 def calibrate(options: dict[str, Any]) -> TableCalibration:
@@ -197,18 +261,20 @@ def debug(options: dict[str, Any]) -> list[Path]:
 
     The frames as the camera gave them go to ``out/raw`` (replay them with the ``perceive`` command).
     """
+    video = video_path(options["video"]) if options["video"] else None  # a bad name fails before the episode
     env, _, camera = build_loop(options)
     policy = _policy(options)
     locator = env.perception.locator
     out = Path(options["out"])
     (out / "raw").mkdir(parents=True, exist_ok=True)
-    written = []
+    written, annotated = [], []
     td = env.reset()
     for step in range(options["steps"]):
         frame = env.last_frame  # the frame behind the observation the policy acts on, not a second read
         path = out / f"frame_{step:04d}.png"
         cv2.imwrite(str(out / "raw" / path.name), frame)
-        cv2.imwrite(str(path), draw_perception(frame, locator.locate(frame)))
+        annotated.append(draw_perception(frame, locator.locate(frame)))
+        cv2.imwrite(str(path), annotated[-1])
         written.append(path)
         td = env.step(policy(td))
         if bool(td["next", "done"]):
@@ -216,6 +282,9 @@ def debug(options: dict[str, Any]) -> list[Path]:
         td = step_mdp(td)
     camera.close()
     print(f"wrote {len(written)} annotated frames to {out}")
+    if video is not None:
+        rgb = [cv2.cvtColor(frame, cv2.COLOR_BGR2RGB) for frame in annotated]
+        print(f"wrote {write_video(rgb, video, fps=round(1 / env.dt))}")
     return written
 
 

@@ -15,6 +15,9 @@ from pathlib import Path
 import cv2
 import mujoco
 import numpy as np
+import torch
+from tensordict import TensorDict
+from tensordict.nn import TensorDictModuleBase
 
 from torchrl_cebp.envs.franka import FrankaLayout, FrankaPickPlaceEnv
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION as OBS
@@ -188,6 +191,28 @@ class MuJoCoTwinBackend(RobotBackend):
 
     def stop(self) -> None:
         self.stopped = True
+
+    @torch.no_grad()
+    def simulate(self, policy: TensorDictModuleBase, goal: np.ndarray) -> bool:
+        """One episode in plain simulation: ``policy`` acts on the true state (no camera), towards ``goal``.
+
+        Resets like :meth:`reset` (the next cube placement of the seed's stream), so a second backend with
+        the seed of a camera loop's replays that loop's episodes on the same cube placements and goals.
+        Returns whether the cube ends within the success threshold of ``goal``, as the camera loop scores it.
+
+        Example:
+            >>> from torchrl_cebp.sim2real import ScriptedPickPlace
+            >>> type(MuJoCoTwinBackend(seed=0).simulate(ScriptedPickPlace(), np.array([0.5, 0.0, 0.2])))
+            <class 'bool'>
+        """
+        self.reset()
+        self.env.goal = np.asarray(goal, np.float64).copy()
+        obs = self.env._get_obs()
+        info: dict = {}
+        for _ in range(self.layout.max_episode_steps):
+            td = TensorDict({key: torch.as_tensor(obs[key], dtype=torch.float32) for key in ("observation", "desired_goal")})
+            obs, _, _, _, info = self.env.step(policy(td)["action"].numpy())
+        return bool(info["is_success"])
 
     def cube_position(self) -> np.ndarray:
         """Ground truth the real setup does not have: the simulated cube's centre."""
