@@ -7,6 +7,7 @@ re-expression of the released CEBP sampler (erdiphd/HER_force, see shared/refere
 from __future__ import annotations
 
 import itertools
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -173,6 +174,14 @@ def build_torchrl_her(stored: Episodes, pool: Episodes, n_writes: int) -> tuple[
         rb.extend(next(fresh))
 
     return rb.sample, write
+
+
+def require_stable_baselines3() -> None:
+    """Exits, naming the install command, when the peer Stable-Baselines3 is missing (the ``bench`` extra)."""
+    try:
+        import stable_baselines3  # noqa: F401
+    except ModuleNotFoundError:
+        sys.exit("this benchmark runs Stable-Baselines3 beside ours: pip install -e '.[bench]' (or leave its sb3 methods out)")
 
 
 def build_sb3_her(stored: Episodes, pool: Episodes, n_writes: int) -> tuple[Draw, Write]:

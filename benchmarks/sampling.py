@@ -21,7 +21,10 @@ from pathlib import Path
 import torch
 from omegaconf import OmegaConf
 
-from _peers import BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, episodes_to_tensordict, make_episodes
+from _peers import (
+    BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, episodes_to_tensordict, make_episodes,
+    require_stable_baselines3,
+)
 
 # Episodes the write timings cycle through; fresh data, never the stored episodes again.
 POOL_EPISODES = 32
@@ -153,6 +156,7 @@ def main() -> None:
 
     # Shared 2-core machines: more threads only add contention, and the peers' reference runs used 1.
     torch.set_num_threads(1)
+    require_stable_baselines3()
     methods: dict[str, Builder] = dict(PEERS)
     if not args.peers_only:
         methods.update(_our_methods())

@@ -32,6 +32,7 @@ import gymnasium as gym
 import gymnasium_robotics
 import numpy as np
 import torch
+from _peers import require_stable_baselines3
 from hydra import compose, initialize_config_dir
 from torch import nn
 
@@ -229,6 +230,8 @@ def main() -> None:
         "plain": lambda threads: run_plain(args.cycles, args.workers),
         "sb3": lambda threads: run_sb3(args.cycles, args.workers),
     }
+    if any(method.partition(":")[0] == "sb3" for method in args.methods):
+        require_stable_baselines3()
     results = {}
     for method in args.methods:
         name, _, threads = method.partition(":")
