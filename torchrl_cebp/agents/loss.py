@@ -78,14 +78,19 @@ class HERDDPGLoss(DDPGLoss):
                 gamma=gamma, value_network=self.actor_critic, low=-1.0 / (1.0 - gamma), high=0.0
             )
         )
-        # An estimator instance keeps its default keys; give it the loss's.
-        self._forward_value_estimator_keys()
+        # An estimator instance keeps its own default keys (its value is "state_value"); give it the loss's.
+        self.value_estimator.set_keys(
+            value=self.tensor_keys.state_action_value,
+            reward=self.tensor_keys.reward,
+            done=self.tensor_keys.done,
+            terminated=self.tensor_keys.terminated,
+        )
 
     def loss_actor(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict]:
         td = tensordict.select(*self.actor_in_keys, *self.value_exclusive_keys, strict=False).detach()
         with self.actor_network_params.to_module(self.actor_network, preserve_module_state=False):
             td = self.actor_network(td)
-        with self._cached_detached_value_params.to_module(self.value_network, preserve_module_state=False):
+        with self.value_network_params.detach().to_module(self.value_network, preserve_module_state=False):
             td = self.value_network(td)
         action = td.get(self.actor_network.out_keys[0])
         action_penalty = action.square().mean()

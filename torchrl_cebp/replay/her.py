@@ -11,7 +11,7 @@ from tensordict.utils import NestedKey
 from torchrl.data.replay_buffers.sample_units import SampleUnit
 from torchrl.data.replay_buffers.storages import Storage
 
-from torchrl_cebp.replay import _upstream
+from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import episode_lengths, next_key
 from torchrl_cebp.replay.samplers.base import split_index
 from torchrl_cebp.replay.storage import _EpisodeRows
@@ -148,15 +148,20 @@ class HindsightRelabel(SampleUnit):
         flat = torch.add(steps, rows, alpha=episodes.shape[1])
         stored_goal = episodes.get(self.goal_key).flatten(0, 1).index_select(0, flat)
         achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1).index_select(0, flat)
-        goal = torch.where(relabel.unsqueeze(-1), candidate, stored_goal)
-        entries: dict[NestedKey, torch.Tensor] = {
-            self.goal_key: goal,
-            self.next_goal_key: goal,
-            self.reward_key: self.reward_fn(achieved, goal),
-        }
+        entries = self._relabelled(relabel, candidate, stored_goal, achieved)
         if self.relabelled_key is not None:
             entries[self.relabelled_key] = relabel
         return entries
+
+    def _relabelled(
+        self, relabel: torch.Tensor, candidate: torch.Tensor, stored_goal: torch.Tensor, next_achieved: torch.Tensor
+    ) -> dict[NestedKey, torch.Tensor]:
+        """The goal and reward entries of transitions: ``candidate`` where ``relabel``, else their stored goal.
+
+        The one place both consumers (:meth:`relabel` and the buffer's :meth:`collate`) build them.
+        """
+        goal = torch.where(relabel.unsqueeze(-1), candidate, stored_goal)
+        return {self.goal_key: goal, self.next_goal_key: goal, self.reward_key: self.reward_fn(next_achieved, goal)}
 
     def _draw(
         self,
@@ -214,10 +219,10 @@ class HindsightRelabel(SampleUnit):
             )
         self._pending.draw = None
         relabel, candidate = draw
-        goal = torch.where(relabel.unsqueeze(-1), candidate, data.get(self.goal_key))
-        data.set(self.goal_key, goal)
-        data.set(self.next_goal_key, goal)
-        data.set(self.reward_key, self.reward_fn(data.get(self.next_achieved_goal_key), goal))
+        for key, value in self._relabelled(
+            relabel, candidate, data.get(self.goal_key), data.get(self.next_achieved_goal_key)
+        ).items():
+            data.set(key, value)
         return data
 
     def __repr__(self) -> str:

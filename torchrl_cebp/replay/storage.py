@@ -9,7 +9,7 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage
 
-from torchrl_cebp.replay import _upstream
+from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import common_length, episode_lengths
 
 
@@ -70,18 +70,18 @@ class _EpisodeRows:
         state = super().state_dict()
         if self.initialized:
             filled_rows = self.shape[0]
-            state["_storage"] = self.get(slice(0, filled_rows)).apply(torch.clone).state_dict()
+            state[_upstream.STORAGE_STATE_KEY] = self.get(slice(0, filled_rows)).apply(torch.clone).state_dict()
             state["rows"] = self.max_size // self.shape[1]
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         rows = state_dict.get("rows")
         if rows is not None:  # the filled rows, back into a storage of the full capacity
-            filled = TensorDict().load_state_dict(state_dict["_storage"], strict=False)
+            filled = TensorDict().load_state_dict(state_dict[_upstream.STORAGE_STATE_KEY], strict=False)
             full = filled.apply(lambda t: torch.zeros((rows, *t.shape[1:]), dtype=t.dtype),
                                 batch_size=[rows, *filled.shape[1:]])
             full[: filled.shape[0]] = filled
-            state_dict = {**state_dict, "_storage": full.state_dict()}
+            state_dict = {**state_dict, _upstream.STORAGE_STATE_KEY: full.state_dict()}
         super().load_state_dict(state_dict)
         self._lengths = None
 

@@ -20,6 +20,7 @@ from tensordict.utils import NestedKey
 from torchrl.data.replay_buffers.samplers import Sampler, SumSegmentTreeFp64
 from torchrl.data.replay_buffers.storages import Storage
 
+from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import common_length, episode_lengths, valid_steps
 
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
@@ -98,9 +99,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     which is when the priority of each written episode is computed.
 
     Args:
-        generator (torch.Generator, optional): random source of the draws;
-            the global torch RNG when omitted. A buffer's ``generator=`` (or
-            ``set_rng``) replaces it.
         end_key (NestedKey): the flag that ends an episode before its row does.
 
     Examples:
@@ -122,8 +120,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         [1]
     """
 
-    def __init__(self, generator: torch.Generator | None = None, end_key: NestedKey = ("next", "done")) -> None:
-        self._rng = generator
+    def __init__(self, end_key: NestedKey = ("next", "done")) -> None:
         self.end_key = end_key
         self._priorities = torch.zeros(0, dtype=torch.float64)
         self._lengths = torch.zeros(0, dtype=torch.long)
@@ -225,7 +222,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._tree[rows] = priority
 
     def _uniform(self, *shape: int) -> torch.Tensor:
-        return torch.rand(*shape, generator=self._rng, dtype=torch.float64)
+        return torch.rand(*shape, generator=_upstream.sampler_generator(self), dtype=torch.float64)
 
     def draw_episodes(self, batch_size: int) -> torch.Tensor:
         """Episode rows drawn proportionally to their priority (O(batch x log rows))."""
@@ -242,7 +239,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     def draw_steps(self, rows: torch.Tensor) -> torch.Tensor:
         """A valid step per drawn row: uniform, or by the cumulative step weights."""
         if self._cumulative_step_weights is None and self._common_length is not None:
-            return torch.randint(self._common_length, rows.shape, generator=self._rng)
+            return torch.randint(self._common_length, rows.shape, generator=_upstream.sampler_generator(self))
         lengths = self._lengths.index_select(0, rows)
         if self._cumulative_step_weights is None:
             return (self._uniform(rows.numel()) * lengths).long().clamp_(max=lengths - 1)

@@ -35,9 +35,8 @@ class _ContactEnergySampler(EpisodePrioritySampler):
         next_position_key: NestedKey,
         next_observation_key: NestedKey,
         end_key: NestedKey,
-        generator: torch.Generator | None,
     ) -> None:
-        super().__init__(generator, end_key)
+        super().__init__(end_key)
         self.touch_key = touch_key
         self.position_key = position_key
         self.next_position_key = next_position_key
@@ -120,9 +119,8 @@ class CEBPSampler(_ContactEnergySampler):
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
         end_key: NestedKey = ("next", "done"),
-        generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(None, touch_key, position_key, next_position_key, ("next", "observation"), end_key, generator)
+        super().__init__(None, touch_key, position_key, next_position_key, ("next", "observation"), end_key)
         for name, value in (("scale", scale), ("temperature", temperature)):
             if not value > 0:
                 raise ValueError(f"CEBPSampler {name}={value!r}: must be a positive number")
@@ -188,9 +186,8 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
         next_position_key: NestedKey = ("next", "achieved_goal"),
         next_observation_key: NestedKey = ("next", "observation"),
         end_key: NestedKey = ("next", "done"),
-        generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(workspace, touch_key, position_key, next_position_key, next_observation_key, end_key, generator)
+        super().__init__(workspace, touch_key, position_key, next_position_key, next_observation_key, end_key)
         self.k = float(k)
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
@@ -250,9 +247,8 @@ class InitialCEBPSampler(_ContactEnergySampler):
         next_position_key: NestedKey = ("next", "achieved_goal"),
         next_observation_key: NestedKey = ("next", "observation"),
         end_key: NestedKey = ("next", "done"),
-        generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(workspace, touch_key, position_key, next_position_key, next_observation_key, end_key, generator)
+        super().__init__(workspace, touch_key, position_key, next_position_key, next_observation_key, end_key)
         self.beta = float(beta)
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:

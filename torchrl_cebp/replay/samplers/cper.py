@@ -40,9 +40,8 @@ class CPERSampler(EpisodePrioritySampler):
         *,
         touch_key: NestedKey = ("next", "touch"),
         end_key: NestedKey = ("next", "done"),
-        generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(generator, end_key)
+        super().__init__(end_key)
         self.threshold = float(threshold)
         self.lam = float(lam)
         self.touch_key = touch_key

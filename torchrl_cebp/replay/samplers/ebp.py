@@ -51,9 +51,8 @@ class EBPSampler(EpisodePrioritySampler):
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
         end_key: NestedKey = ("next", "done"),
-        generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(generator, end_key)
+        super().__init__(end_key)
         self.clip_energy = float(clip_energy)
         self.temperature = float(temperature)
         self.w_potential = float(w_potential)

@@ -73,9 +73,8 @@ class MEPSampler(EpisodePrioritySampler):
         position_key: NestedKey = "achieved_goal",
         next_position_key: NestedKey = ("next", "achieved_goal"),
         end_key: NestedKey = ("next", "done"),
-        generator: torch.Generator | None = None,
     ) -> None:
-        super().__init__(generator, end_key)
+        super().__init__(end_key)
         self.n_components = int(n_components)
         self.temperature = float(temperature)
         self.max_fit_episodes = int(max_fit_episodes)

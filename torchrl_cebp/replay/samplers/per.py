@@ -10,7 +10,7 @@ from torchrl.data.replay_buffers.samplers import PrioritizedSampler
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl.data.replay_buffers.storages import Storage
 
-from torchrl_cebp.replay import _upstream
+from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import episode_lengths, valid_steps
 from torchrl_cebp.replay.samplers.base import stored_rows
 
@@ -65,13 +65,11 @@ class PERSampler(PrioritizedSampler):
         eps: float = 1e-6,
         *,
         end_key: NestedKey = ("next", "done"),
-        generator: torch.Generator | None = None,
     ) -> None:
         super().__init__(int(capacity), alpha=alpha, beta=beta, eps=eps)
         self.beta_end = float(beta_end)
         self.beta_anneal_draws = int(beta_anneal_draws)
         self.end_key = end_key
-        self._rng = generator
 
     def beta_scheduler(self) -> LinearScheduler:
         """TorchRL's linear scheduler taking beta from its current value to ``beta_end`` in ``beta_anneal_draws`` steps."""

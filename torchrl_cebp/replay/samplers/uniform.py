@@ -4,6 +4,7 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDictBase
 
+from torchrl_cebp import _upstream
 from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler
 
 
@@ -33,4 +34,4 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
 
     def draw_episodes(self, batch_size: int) -> torch.Tensor:
         # Equal priorities: a plain randint is the same distribution without the tree walk.
-        return torch.randint(self._n_stored, (batch_size,), generator=self._rng)
+        return torch.randint(self._n_stored, (batch_size,), generator=_upstream.sampler_generator(self))

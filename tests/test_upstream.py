@@ -1,4 +1,4 @@
-"""Pins every private TorchRL / tensordict attribute the replay package reaches (torchrl_cebp/replay/_upstream.py).
+"""Pins every private TorchRL / tensordict attribute the package reaches (torchrl_cebp/_upstream.py).
 
 Each test fails, by name, if an upgrade moves or changes one of them.
 """
@@ -8,7 +8,9 @@ from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, PrioritizedSampler, TensorDictReplayBuffer
 
 from tests.replay.conftest import T, make_episodes
-from torchrl_cebp.replay import _upstream
+from torchrl_cebp import _upstream
+from torchrl_cebp.replay import EpisodeStorage
+from torchrl_cebp.samplers import UniformEpisodeSampler
 
 
 def test_the_buffer_generator_reaches_the_storage():
@@ -20,6 +22,26 @@ def test_the_buffer_generator_reaches_the_storage():
     other = torch.Generator()
     rb.set_rng(other)
     assert _upstream.buffer_generator(rb.storage) is other
+
+
+def test_the_buffer_generator_reaches_the_sampler_and_none_means_the_global_rng():
+    sampler = UniformEpisodeSampler()
+    generator = torch.Generator().manual_seed(0)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(10 * T), sampler=sampler, dim_extend=0, batch_size=4,
+                                generator=generator)
+    assert _upstream.sampler_generator(sampler) is generator
+    other = torch.Generator()
+    rb.set_rng(other)
+    assert _upstream.sampler_generator(sampler) is other
+    TensorDictReplayBuffer(storage=EpisodeStorage(10 * T), sampler=sampler, dim_extend=0, batch_size=4)
+    assert _upstream.sampler_generator(sampler) is None  # a buffer without a generator clears it
+
+
+def test_the_storage_state_keeps_the_stored_tensordict_under_its_key():
+    storage = LazyTensorStorage(10 * T, ndim=2)
+    storage.set(torch.arange(2), make_episodes(2))
+    saved = TensorDict().load_state_dict(storage.state_dict()[_upstream.STORAGE_STATE_KEY], strict=False)
+    assert torch.equal(saved["action"], _upstream.stored_tensordict(storage)["action"])
 
 
 def test_the_stored_tensordict_is_what_the_storage_reads_and_writes():
@@ -72,6 +94,12 @@ def test_a_prioritized_sampler_round_trips_through_plain_tensors():
     got = copy.sample(storage, 256)
     assert all(torch.equal(a, b) for a, b in zip(expected[0], got[0]))  # (rows, steps)
     assert torch.equal(expected[1]["priority_weight"], got[1]["priority_weight"])
+    assert [float(v) for v in copy._max_priority] == [float(v) for v in rb.sampler._max_priority]
+    fresh = torch.arange(3 * T, 4 * T)  # new transitions enter at the restored running maximum
+    for sampler in (rb.sampler, copy):
+        sampler.mark_update(fresh)
+    assert torch.equal(torch.as_tensor(copy._sum_tree[fresh]), torch.as_tensor(rb.sampler._sum_tree[fresh]))
+    assert (torch.as_tensor(copy._sum_tree[fresh]) > 0).all()
 
 
 def test_excluded_transitions_are_never_drawn():

@@ -1,8 +1,9 @@
-"""Every private attribute of TorchRL or tensordict the replay package reaches, in one place.
+"""Every private attribute of TorchRL or tensordict the package reaches, in one place.
 
 Each use below has no public equivalent in TorchRL 0.14.1 / tensordict 0.14.3 (pinned in
-pyproject.toml). ``tests/replay/test_upstream.py`` pins each one, so an upstream change fails
-there, by name, before it can change a draw silently.
+pyproject.toml). ``tests/test_upstream.py`` pins each one, so an upstream change fails there,
+by name, before it can change a draw silently. (The samplers also implement ``Sampler._empty``,
+the abstract hook TorchRL's ``Sampler`` requires of every subclass.)
 """
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from typing import Any
 
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torchrl.data.replay_buffers.samplers import PrioritizedSampler
+from torchrl.data.replay_buffers.samplers import PrioritizedSampler, Sampler
 from torchrl.data.replay_buffers.storages import Storage, TensorStorage
 
 
@@ -21,6 +22,20 @@ def buffer_generator(storage: Storage) -> torch.Generator | None:
     public getter; a sample unit only sees the storage.
     """
     return getattr(storage, "_rng", None)
+
+
+def sampler_generator(sampler: Sampler) -> torch.Generator | None:
+    """The generator a buffer handed its sampler (``generator=`` or ``set_rng``); ``None``: torch's global RNG.
+
+    ``ReplayBuffer`` always writes it to ``sampler._rng`` (``None`` when the buffer has no generator),
+    and a ``Sampler`` subclass has no public getter for it.
+    """
+    return getattr(sampler, "_rng", None)
+
+
+# The key under which ``TensorStorage.state_dict`` keeps its stored tensordict's state; the episode storage
+# saves only the filled rows there, so that a checkpoint grows with the stored episodes.
+STORAGE_STATE_KEY = "_storage"
 
 
 def unchecked_tensordict(source: dict, batch_size: torch.Size, device: torch.device | None) -> TensorDict:
@@ -39,7 +54,7 @@ def prioritized_state(sampler: PrioritizedSampler) -> dict[str, Any]:
     Its own ``state_dict`` holds the C++ segment trees, which ``torch.load(weights_only=True)``
     refuses; the trees' values and the running maximum are only reachable privately.
     """
-    every = torch.arange(sampler._max_capacity)
+    every = torch.arange(sampler.max_size)
     max_value, max_index = sampler._max_priority
     return {
         # Plain floats: a TorchRL scheduler leaves numpy scalars, which weights_only loads refuse.
@@ -54,12 +69,16 @@ def prioritized_state(sampler: PrioritizedSampler) -> dict[str, Any]:
 
 
 def load_prioritized_state(sampler: PrioritizedSampler, state: dict[str, Any]) -> None:
-    """Restores what :func:`prioritized_state` saved."""
-    sampler._alpha = state["alpha"]
+    """Restores what :func:`prioritized_state` saved.
+
+    ``eps``, the trees and the running maximum have no public setter; ``_init()`` empties the trees
+    (the exponent is set first, while they are empty, so that its setter has nothing to re-transform).
+    """
+    sampler._init()
+    sampler.alpha = state["alpha"]
     sampler.beta = state["beta"]
     sampler._eps = state["eps"]
-    sampler._init()
-    every = torch.arange(sampler._max_capacity)
+    every = torch.arange(sampler.max_size)
     sampler._sum_tree[every] = state["sum_tree"]
     sampler._min_tree[every] = state["min_tree"]
     sampler._max_priority = (state["max_priority"], state["max_priority_index"])
