@@ -334,3 +334,15 @@ def test_per_resumes_its_beta(tmp_path):
     resumed = rows(train(config(*per, "resume=true"), tmp_path / "split"))
     for key in ("loss_value", "is_weight_mean", "is_weight_min"):
         assert [r[key] for r in resumed] == [r[key] for r in straight]
+
+
+def test_code_version_is_the_commit_the_process_loaded(monkeypatch):
+    from torchrl_cebp.training import metrics
+
+    heads = iter(["aaaaaaaaaaaa\n", "bbbbbbbbbbbb\n"])  # HEAD moves between two runs of one sweep process
+    monkeypatch.setattr(metrics.subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 0, next(heads), ""))
+    metrics.code_version.cache_clear()
+    try:
+        assert [metrics.code_version(), metrics.code_version()] == ["aaaaaaaaaaaa", "aaaaaaaaaaaa"]
+    finally:
+        metrics.code_version.cache_clear()

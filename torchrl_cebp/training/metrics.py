@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import functools
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -35,8 +36,12 @@ def make_logger(kind: str, run_dir: str | Path) -> Logger | None:
     return get_logger(kind, logger_name=str(run_dir / "logs"), experiment_name=run_dir.name, **extra)
 
 
+@functools.cache
 def code_version() -> str:
     """The git commit of the package's checkout (``+dirty`` with uncommitted changes), or ``unknown`` outside git.
+
+    Read once per process: the runs of an in-process sweep keep running the code the process loaded,
+    whatever later commits move the checkout's HEAD to.
 
     Example:
         >>> len(code_version()) > 0
