@@ -34,7 +34,9 @@ def read_progress(run_dir: Path) -> list[dict[str, float]]:
     if not path.exists():
         return []
     with path.open(newline="") as f:
-        return [{key: float(value) for key, value in row.items() if value} for row in csv.DictReader(f)]
+        # Every column but the code's commit is a number.
+        return [{key: float(value) for key, value in row.items() if value and key != "code_commit"}
+                for row in csv.DictReader(f)]
 
 
 def first_epoch_reaching(rows: list[dict[str, float]], level: float) -> int | None:
