@@ -20,20 +20,24 @@ from torchrl_cebp.training.checkpoint import read_policy_state
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
 
-def _checkpoint_env(checkpoint: Path, **kwargs):
-    """The env the policy's run trained on (task, goal space, robot); ``kwargs`` go to ``make_env``."""
-    from torchrl_cebp.envs import make_env_from_config
+def _policy_and_env(checkpoint: str | Path, **kwargs):
+    """The policy and the env its run trained on (task, goal space, robot), from one read of the file.
 
-    return make_env_from_config(read_policy_state(checkpoint)["env"], **kwargs)
+    ``kwargs`` go to ``make_env``.
+    """
+    from torchrl_cebp.envs import make_env_from_config
+    from torchrl_cebp.training.checkpoint import policy_from_state
+
+    state = read_policy_state(checkpoint)
+    return policy_from_state(state), make_env_from_config(state["env"], **kwargs)
 
 
 def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -> float:
     """Fraction of ``episodes`` deterministic episodes that end within the goal threshold (the trainer's measure)."""
-    from torchrl_cebp.training import load_policy
     from torchrl_cebp.training.evaluation import evaluate_success_rate
 
-    env = _checkpoint_env(Path(checkpoint), seed=seed, num_envs=episodes)
-    return evaluate_success_rate(env, load_policy(checkpoint), episodes)
+    policy, env = _policy_and_env(checkpoint, seed=seed, num_envs=episodes)
+    return evaluate_success_rate(env, policy, episodes)
 
 
 @torch.no_grad()
@@ -46,11 +50,8 @@ def record_video(
     fps: int = 25,
 ) -> Path:
     """Renders ``episodes`` deterministic episodes to ``path`` (``.mp4`` or ``.gif``)."""
-    from torchrl_cebp.training import load_policy
-
     path = video_path(path)
-    policy = load_policy(checkpoint)
-    env = _checkpoint_env(Path(checkpoint), seed=seed, render_size=size)
+    policy, env = _policy_and_env(checkpoint, seed=seed, render_size=size)
     frames = []
     try:
         for _ in range(episodes):

@@ -101,9 +101,6 @@ def restore_training_state(
     return state["epoch"] + 1, state["wall_s"]
 
 
-_ACTOR_PREFIX = "actor_network_params."
-
-
 def rng_state() -> dict[str, Any]:
     """The torch RNG states (CPU and, when present, CUDA): the samplers, HER and exploration draw from them."""
     state = {"torch": torch.get_rng_state()}
@@ -142,6 +139,9 @@ def save_policy(state: dict[str, Any], path: str | Path) -> Path:
     """Writes a :func:`policy_state` to ``path`` (a run directory gets ``policy.pt``), atomically."""
     path = Path(path)
     return _save_atomically(state, path / POLICY_NAME if path.is_dir() else path)
+
+
+_ACTOR_PREFIX = "actor_network_params."
 
 
 def read_policy_state(source: str | Path) -> dict[str, Any]:
@@ -189,7 +189,11 @@ def load_policy(source: str | Path) -> TensorDictSequential:
         >>> policy(TensorDict(observation=torch.zeros(25), desired_goal=torch.zeros(3)))["action"].shape
         torch.Size([4])
     """
-    state = read_policy_state(source)
+    return policy_from_state(read_policy_state(source))
+
+
+def policy_from_state(state: dict[str, Any]) -> TensorDictSequential:
+    """The deterministic policy of a :func:`read_policy_state` (for callers that also need its ``env``)."""
     weights = [value for key, value in state["actor"].items() if key.endswith("weight")]
     obs_dim, goal_dim = state["normalizer"]["obs.sum"].numel(), state["normalizer"]["goal.sum"].numel()
     normalizer = ObsGoalNormalizer(obs_dim, goal_dim)
