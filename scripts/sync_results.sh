@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Copies every comparison run's progress.csv from runs/ to docs/results/comparison/ (same layout), and
 # every learning check's (benchmarks/learning.py, runs/learning/) to docs/results/learning/collectors/,
+# the Sim2Real training's (runs/franka_pick_place-*) to docs/results/sim2real/training/,
 # and commits them, so that finished epochs survive the session. Usage: bash scripts/sync_results.sh [--every SECONDS]
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -11,6 +12,7 @@ sync_once() {
   while IFS= read -r csv; do
     case "$csv" in
       runs/learning/*) dest="docs/results/learning/collectors/${csv#runs/learning/}" ;;
+      runs/franka_pick_place-*) dest="docs/results/sim2real/training/${csv#runs/}" ;;
       *) dest="docs/results/comparison/${csv#runs/}" ;;
     esac
     if ! cmp -s "$csv" "$dest"; then
@@ -18,8 +20,8 @@ sync_once() {
     fi
   done < <(find runs -path runs/quick -prune -o -name progress.csv -print 2>/dev/null | sort)
   if [ "$changed" = 1 ]; then
-    git add docs/results/comparison docs/results/learning
-    git commit -q -m "Comparison: epochs finished by $(date -u +%H:%MZ)" -- docs/results/comparison docs/results/learning \
+    git add docs/results/comparison docs/results/learning docs/results/sim2real
+    git commit -q -m "Comparison: epochs finished by $(date -u +%H:%MZ)" -- docs/results/comparison docs/results/learning docs/results/sim2real \
       && echo "[sync] $(date -u +%TZ) committed"
   fi
 }
