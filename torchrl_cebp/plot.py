@@ -300,7 +300,7 @@ def summary_table(
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
-        description="Success curves of a sweep (IQM over seeds, 95%% stratified-bootstrap band), and tables."
+        description="Success curves of a sweep (IQM over seeds, 95% stratified-bootstrap band), and tables."
     )
     parser.add_argument("root", help="sweep folder (e.g. runs/ or multirun/...)")
     parser.add_argument("--out", help="PNG path (default: <root>/<metric>.png)")

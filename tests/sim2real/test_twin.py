@@ -20,6 +20,7 @@ from torchrl_cebp.sim2real import (
     TableCalibration,
     TwinCamera,
     Workspace,
+    draw_perception,
 )
 from torchrl_cebp.sim2real.__main__ import main, parse_args, run
 from torchrl_cebp.training import load_policy
@@ -135,7 +136,7 @@ def test_cli_rejects_bad_values_naming_them(capsys):
     for argv, message in (
         (["run", "backend=ur5", "policy=scripted"], "invalid choice: 'ur5'"),
         (["run", "episodes=many", "policy=scripted"], "invalid int value: 'many'"),
-        (["run"], "checkpoint=PATH"),
+        (["run", "checkpoint="], "checkpoint=PATH"),
         (["calibrate"], "the following arguments are required: --out"),
         (["fly"], "invalid choice: 'fly'"),
     ):
@@ -189,11 +190,19 @@ def test_debug_annotates_the_frames_the_policy_acted_on(tmp_path, monkeypatch):
     monkeypatch.setattr(TwinCamera, "read", lambda self: frames.append(read(self)) or frames[-1])
     assert main(["debug", f"out={tmp_path}", "steps=3"]) == 0
     assert len(frames) == 4  # the reset's frame and one per step: no second read for the annotation
+    locator = CubeLocator(TWIN_CALIBRATION)
     for i in range(3):
         raw = cv2.imread(str(tmp_path / "raw" / f"frame_{i:04d}.png"))
         np.testing.assert_array_equal(raw, frames[i])
         annotated = cv2.imread(str(tmp_path / f"frame_{i:04d}.png"))
-        assert 0.5 < (annotated == raw).all(-1).mean() < 1.0  # the same frame, with the annotation drawn on it
+        # The annotation's pixels: where drawing the same perception changes a black or a white canvas.
+        found = locator.locate(raw)
+        drawn = np.zeros(raw.shape[:2], bool)
+        for blank in (np.zeros_like(raw), np.full_like(raw, 255)):
+            drawn |= (draw_perception(blank, found) != blank).any(-1)
+        assert 0.001 < drawn.mean() < 0.2
+        np.testing.assert_array_equal(annotated[~drawn], raw[~drawn])  # the frame the policy saw, pixel for pixel
+        assert (annotated[drawn] != raw[drawn]).any(-1).mean() > 0.5
 
 
 def test_camera_only_mode_annotates_recorded_frames(tmp_path, capsys):

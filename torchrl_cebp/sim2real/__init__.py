@@ -16,7 +16,7 @@ from torchrl_cebp.sim2real.perception import (
     draw_perception,
     fit_homography,
 )
-from torchrl_cebp.sim2real.policy import ScriptedPickPlace
+from torchrl_cebp.sim2real.policy import SHIPPED_POLICY, ScriptedPickPlace
 from torchrl_cebp.sim2real.real_loop import ParallaxCorrection, RealLoopEnv, SafetyStatus, Workspace
 from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend, RobotState
 from torchrl_cebp.sim2real.synthetic import render_table_scene
@@ -24,6 +24,7 @@ from torchrl_cebp.sim2real.twin import TWIN_CALIBRATION, MuJoCoTwinBackend, Twin
 
 __all__ = [
     "RED_HSV_RANGES",
+    "SHIPPED_POLICY",
     "TWIN_CALIBRATION",
     "Blob",
     "CameraLost",

@@ -1,10 +1,10 @@
 """Sim2Real commands: run a policy through camera -> perception -> robot, calibrate the table, write debug frames.
 
+    python -m torchrl_cebp.sim2real run backend=sim episodes=50 compare_sim=true   # the shipped policy, beside plain simulation
     python -m torchrl_cebp.sim2real run policy=scripted backend=sim episodes=5
-    python -m torchrl_cebp.sim2real run checkpoint=runs/.../seed0 backend=sim episodes=20
+    python -m torchrl_cebp.sim2real run checkpoint=runs/.../seed0 backend=sim episodes=20   # a policy you trained
     python -m torchrl_cebp.sim2real calibrate backend=sim out=table.yaml
     python -m torchrl_cebp.sim2real calibrate backend=franky host=172.16.0.2 out=table.yaml
-    python -m torchrl_cebp.sim2real run checkpoint=POLICY backend=sim episodes=50 compare_sim=true   # beside plain simulation
     python -m torchrl_cebp.sim2real debug out=debug_frames steps=40 video=episode.mp4
     python -m torchrl_cebp.sim2real perceive frames=debug_frames/raw out=annotated/   # camera only (calibration=FILE)
 
@@ -31,7 +31,7 @@ from torchrl.envs.utils import step_mdp
 from torchrl_cebp.sim2real.calibration import TableCalibration
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource, ImageFolderCamera, OpenCVCamera
 from torchrl_cebp.sim2real.perception import CubeLocator, CubePerception, PerceptionStatus, draw_perception
-from torchrl_cebp.sim2real.policy import ScriptedPickPlace
+from torchrl_cebp.sim2real.policy import SHIPPED_POLICY, ScriptedPickPlace
 from torchrl_cebp.sim2real.real_loop import ParallaxCorrection, RealLoopEnv, SafetyStatus
 from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend
 from torchrl_cebp.evaluate import video_path, write_video
@@ -59,7 +59,8 @@ def _boolean(text: str) -> bool:
 _OPTIONS: dict[str, dict[str, Any]] = {
     "backend": {"choices": _BACKENDS, "default": "sim", "help": "sim: the MuJoCo twin; franky: a real Franka"},
     "policy": {"choices": ("checkpoint", "scripted"), "default": "checkpoint", "help": "what acts"},
-    "checkpoint": {"default": "", "help": "a training run directory, its checkpoint.pt, or a policy file"},
+    "checkpoint": {"default": str(SHIPPED_POLICY),
+                   "help": "a training run directory, its checkpoint.pt, or a policy file (default: the shipped policy)"},
     "episodes": {"type": int, "default": 5, "help": "episodes to run"},
     "compare_sim": {"type": _boolean, "default": False, "metavar": "BOOL",
                     "help": "also run each episode in plain simulation (true state, no camera) on the same cube and goal"},
@@ -128,7 +129,7 @@ def parse_args(argv: Sequence[str]) -> tuple[str, dict[str, Any]]:
     options = vars(args)
     command = options.pop("command")
     if options.get("policy") == "checkpoint" and not options["checkpoint"]:
-        parser.error("give checkpoint=PATH (a training run directory or checkpoint.pt), or policy=scripted")
+        parser.error("give checkpoint=PATH (a training run directory, its checkpoint.pt or a policy.pt), or policy=scripted")
     if options.get("backend") == "franky" and not options["host"]:
         parser.error("backend=franky needs host=ROBOT_IP")
     if options.get("compare_sim") and options["backend"] != "sim":

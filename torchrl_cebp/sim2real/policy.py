@@ -1,6 +1,11 @@
-"""A scripted pick-and-place the Sim2Real loop can run (trained policies: ``torchrl_cebp.training.load_policy``)."""
+"""The policies the Sim2Real loop runs: the shipped trained one, and a scripted pick-and-place.
+
+Other trained policies load with ``torchrl_cebp.training.load_policy``.
+"""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import torch
 from tensordict import TensorDictBase
@@ -8,7 +13,11 @@ from tensordict.nn import TensorDictModuleBase
 
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION as OBS
 
-__all__ = ["ScriptedPickPlace"]
+__all__ = ["SHIPPED_POLICY", "ScriptedPickPlace"]
+
+# The Franka pick-and-place policy trained with CEBP (docs/results/sim2real/): actor and observation
+# normaliser only, loaded with weights_only=True by torchrl_cebp.training.load_policy.
+SHIPPED_POLICY = Path(__file__).parent / "policies" / "franka_pick_place_cebp.pt"
 
 
 class ScriptedPickPlace(TensorDictModuleBase):
