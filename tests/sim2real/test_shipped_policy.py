@@ -1,0 +1,41 @@
+"""The shipped Franka pick-and-place policy: a small weights-only file that drives the twin through the camera loop."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from tensordict import TensorDict
+
+from torchrl_cebp.envs import FETCH_OBSERVATION
+from torchrl_cebp.sim2real import SHIPPED_POLICY
+from torchrl_cebp.sim2real.__main__ import parse_args, run
+from torchrl_cebp.training import load_policy
+from torchrl_cebp.training.checkpoint import POLICY_FORMAT
+
+
+def test_shipped_policy_is_a_small_weights_only_file_with_the_franka_config():
+    assert SHIPPED_POLICY.stat().st_size < 1_000_000
+    state = torch.load(SHIPPED_POLICY, map_location="cpu", weights_only=True)
+    assert state["format"] == POLICY_FORMAT and set(state) == {"format", "env", "hidden", "actor", "normalizer"}
+    assert state["env"]["task"] == "franka_pick_place"
+
+
+def test_shipped_policy_acts_in_the_franka_action_space():
+    policy = load_policy(SHIPPED_POLICY)
+    batch = TensorDict(observation=torch.randn(5, FETCH_OBSERVATION.size), desired_goal=torch.randn(5, 3), batch_size=[5])
+    action = policy(batch)["action"]
+    assert action.shape == (5, 4) and action.abs().max() <= 1.0
+    assert action.std(0).min() > 0  # it reads its input: different observations, different actions
+
+
+def test_run_uses_the_shipped_policy_by_default():
+    assert parse_args(["run"])[1]["checkpoint"] == str(SHIPPED_POLICY)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue 16's bar, not reached yet: the shipped policy stopped at about 0.5-0.6 "
+                   "test success (docs/results.md, Sim2Real); strict, so a policy that reaches it makes this fail until the "
+                   "marker goes")
+def test_shipped_policy_succeeds_through_the_camera_loop():
+    report = run(parse_args(["run", "backend=sim", "episodes=10"])[1])
+    assert report["camera_loop_success"] >= 0.8
