@@ -212,7 +212,7 @@ def run(options: dict[str, Any]) -> dict[str, Any]:
         loop_successes += success
         episode_held = held_steps(td)
         held, steps = held + episode_held, steps + td.shape[0]
-        goal = np.round(td["desired_goal"][0].numpy(), 3).tolist()
+        goal = [round(v, 3) for v in td["desired_goal"][0].tolist()]
         line = f"episode {episode}: success={success} steps={td.shape[0]} held={dict(episode_held) or 0} goal={goal}"
         if hasattr(backend, "cube_position"):
             error = np.linalg.norm(backend.cube_position() - td["desired_goal"][-1].numpy())
