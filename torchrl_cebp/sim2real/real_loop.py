@@ -124,9 +124,7 @@ class RealLoopEnv(EnvBase):
     is not perceived the cube entries of ``observation`` are NaN, so nothing downstream can act on a stale one.
 
     While the gripper is closed on something the width of the cube, the cube is where the gripper is:
-    a lifted cube is off the table plane the camera measures on. While the cube is not found but the gripper
-    is within a cube's width (in x-y) of where the cube was last perceived, the cube is where it was last
-    perceived: the gripper is hiding it from the camera, and only the gripper can move it.
+    a lifted cube is off the table plane the camera measures on.
 
     Args:
         backend: the robot.
@@ -197,16 +195,7 @@ class RealLoopEnv(EnvBase):
             cube = self.parallax(cube)
         if status is not PerceptionStatus.MARKERS and self._in_gripper(state):
             return state.grip_pos.copy(), PerceptionStatus.OK
-        if status is PerceptionStatus.CUBE and self._under_gripper(state):
-            return self._previous[1].copy(), PerceptionStatus.OK
         return cube, status
-
-    def _under_gripper(self, state: RobotState) -> bool:
-        # An overhead camera loses the cube under the fingers as the gripper comes down on it; holding the robot
-        # there would freeze the scene for good (docs/results.md, Sim2Real). Only the gripper can move the cube.
-        if self._previous is None:
-            return False
-        return bool(np.linalg.norm(self._previous[1][:2] - state.grip_pos[:2]) < self.layout.cube_size)
 
     def _in_gripper(self, state: RobotState) -> bool:
         # Closed on the cube: narrower than open, wider than empty, and the cube was at the fingers last step.
