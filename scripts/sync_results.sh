@@ -6,6 +6,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 every=0
+results=(docs/results/comparison docs/results/learning docs/results/sim2real)
 [ "${1:-}" = "--every" ] && every=${2:?--every needs seconds}
 sync_once() {
   local changed=0
@@ -20,8 +21,8 @@ sync_once() {
     fi
   done < <(find runs -path runs/quick -prune -o -name progress.csv -print 2>/dev/null | sort)
   if [ "$changed" = 1 ]; then
-    git add docs/results/comparison docs/results/learning docs/results/sim2real
-    git commit -q -m "Comparison: epochs finished by $(date -u +%H:%MZ)" -- docs/results/comparison docs/results/learning docs/results/sim2real \
+    git add "${results[@]}"
+    git commit -q -m "Results: epochs finished by $(date -u +%H:%MZ)" -- "${results[@]}" \
       && echo "[sync] $(date -u +%TZ) committed"
   fi
 }

@@ -212,13 +212,13 @@ def run(options: dict[str, Any]) -> dict[str, Any]:
         loop_successes += success
         episode_held = held_steps(td)
         held, steps = held + episode_held, steps + td.shape[0]
-        goal = [round(v, 3) for v in td["desired_goal"][0].tolist()]
-        line = f"episode {episode}: success={success} steps={td.shape[0]} held={dict(episode_held) or 0} goal={goal}"
+        goal = td["desired_goal"][0].numpy()  # one goal per episode
+        line = (f"episode {episode}: success={success} steps={td.shape[0]} held={dict(episode_held) or 0} "
+                f"goal={[round(v, 3) for v in goal.tolist()]}")
         if hasattr(backend, "cube_position"):
-            error = np.linalg.norm(backend.cube_position() - td["desired_goal"][-1].numpy())
-            line += f" true_goal_distance={error:.3f} m"
+            line += f" true_goal_distance={np.linalg.norm(backend.cube_position() - goal):.3f} m"
         if truth is not None:
-            sim_success = truth.simulate(policy, td["desired_goal"][0].numpy())
+            sim_success = truth.simulate(policy, goal)
             sim_successes += sim_success
             line += f" simulation_success={sim_success}"
         print(line, flush=True)
