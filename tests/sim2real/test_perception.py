@@ -52,6 +52,30 @@ def test_covered_marker_fails_with_markers(calibration):
     assert result.blob is not None and result.homography is None
 
 
+def test_hidden_marker_keeps_the_homography_of_an_unmoved_camera(calibration):
+    locator = CubeLocator(calibration)
+    assert locator.locate(render_table_scene(calibration, (0.5, 0.0))).ok
+    frame = render_table_scene(calibration, (0.42, -0.18), occluded_markers=[2])
+    result = locator.locate(degrade(frame, "noise"))
+    assert (result.ok, result.homography_kept, result.missing_markers) == (True, True, (2,))
+    assert np.linalg.norm(result.position[:2] - (0.42, -0.18)) < TOLERANCE
+    assert (draw_perception(frame, result) != frame).any()
+
+
+@pytest.mark.parametrize(
+    "locator_options, view",
+    [({}, "corner"), ({"min_markers_to_confirm": 4}, "oblique"), ({"camera_moved_px": None}, "oblique")],
+    ids=["camera moved", "too few to confirm", "never kept"],
+)
+def test_hidden_marker_fails_unless_the_camera_is_confirmed_unmoved(calibration, locator_options, view):
+    locator = CubeLocator(calibration, **locator_options)
+    assert locator.locate(render_table_scene(calibration, (0.5, 0.0))).ok
+    frame = render_table_scene(calibration, (0.5, 0.0), occluded_markers=[2], table_corners_px=VIEWS[view])
+    result = locator.locate(frame)
+    assert (result.ok, result.reason, result.homography_kept) == (False, "markers", False)
+    assert result.homography is None and np.isnan(result.position).all()
+
+
 def test_no_cube_fails_with_cube(calibration):
     frame = render_table_scene(calibration, None)
     result = CubeLocator(calibration).locate(degrade(frame, "all"))

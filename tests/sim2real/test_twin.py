@@ -92,10 +92,21 @@ def test_scripted_policy_picks_through_camera_perception_robot(loop, twin):
     assert (backend.touch > 0).all()  # held in the air, not resting there
 
 
+def test_one_hidden_marker_keeps_the_loop_acting_on_an_accurate_cube(loop, twin):
+    backend, _ = twin
+    td = loop.reset()
+    backend.env.model.geom("aruco_2").pos[2] = -0.1  # as if the arm stood in front of it
+    td = loop.step(td.set("action", torch.tensor([0.0, 0.0, 0.0, 1.0])))
+    nxt = td["next"]
+    assert nxt["safety_status"].item() == SafetyStatus.OK and nxt["perception_ok"].item()
+    assert np.linalg.norm(nxt["cube_position"].numpy() - backend.cube_position()) < 0.01
+
+
 def test_markers_hidden_holds_still_with_reason(loop, twin):
     backend, _ = twin
     td = loop.reset()
-    for marker_id in (1, 2):
+    # One marker left in view cannot confirm that the camera has not moved.
+    for marker_id in (1, 2, 3):
         backend.env.model.geom(f"aruco_{marker_id}").pos[2] = -0.1  # under the table top: out of view
     td = loop.step(td.set("action", torch.tensor([1.0, 0.0, 0.0, 1.0])))
     nxt = td["next"]

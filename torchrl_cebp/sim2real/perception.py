@@ -41,7 +41,7 @@ class PerceptionStatus(IntEnum):
     """Outcome of one frame; the integer is what :class:`CubePerception` writes to the tensordict."""
 
     OK = 0
-    MARKERS = 1  # fewer than 4 calibrated markers visible: no homography
+    MARKERS = 1  # fewer than 4 calibrated markers visible, and the camera not confirmed unmoved: no homography
     CUBE = 2  # no colour blob of at least the minimum area
 
     @property
@@ -215,7 +215,8 @@ class CubeLocalization:
     """What :meth:`CubeLocator.locate` saw in one frame.
 
     ``position`` is the robot-frame cube centre (float32 ``[3]``), all NaN unless ``status`` is OK; the
-    other fields are kept whatever the status, for the debug drawing.
+    other fields are kept whatever the status, for the debug drawing. ``homography_kept`` says that some
+    markers were hidden and the homography is the one last fitted on all of them (the camera had not moved).
     """
 
     status: PerceptionStatus
@@ -224,6 +225,7 @@ class CubeLocalization:
     missing_markers: tuple[int, ...]
     blob: Blob | None
     homography: np.ndarray | None
+    homography_kept: bool = False
 
     @property
     def ok(self) -> bool:
@@ -248,13 +250,19 @@ class CubeLocator:
     """Locates the cube in the robot frame from one BGR frame.
 
     The homography is refitted on every frame from all visible calibrated markers (at least 4), so a
-    bumped camera is followed rather than silently mis-mapping.
+    bumped camera is followed rather than silently mis-mapping. When the arm hides markers and fewer than
+    4 are seen, the homography last fitted is kept, but only while at least ``min_markers_to_confirm`` of
+    the visible markers sit within ``camera_moved_px`` pixels of where they were then: a fixed camera that
+    has not moved maps the table as before, and a moved one is caught by the markers it still sees.
 
     Args:
         calibration: the markers' robot-frame positions, dictionary and table height.
         cube_size: cube edge in metres; the cube centre is half of it above the table.
         blob_detector: how the cube is found; the default finds red.
         marker_parameters: OpenCV ArUco detector parameters, see :class:`MarkerDetector`.
+        camera_moved_px: how far (pixels) a visible marker may lie from its position at the last fit before
+            the camera counts as moved; ``None`` never keeps a homography (every frame needs 4 markers).
+        min_markers_to_confirm: how many visible markers must confirm an unmoved camera.
 
     Examples:
         >>> from torchrl_cebp.sim2real.synthetic import render_table_scene
@@ -271,24 +279,44 @@ class CubeLocator:
         cube_size: float = 0.05,
         blob_detector: ColorBlobDetector | None = None,
         marker_parameters: cv2.aruco.DetectorParameters | None = None,
+        camera_moved_px: float | None = 2.0,
+        min_markers_to_confirm: int = 2,
     ) -> None:
+        if min_markers_to_confirm < 1:
+            raise ValueError(f"min_markers_to_confirm must be at least 1, got {min_markers_to_confirm}.")
         self.calibration = calibration
         self.cube_size = cube_size
         self.blob_detector = ColorBlobDetector() if blob_detector is None else blob_detector
         self.marker_detector = MarkerDetector(
             calibration.aruco_dictionary, calibration.marker_ids, marker_parameters
         )
+        self.camera_moved_px = camera_moved_px
+        self.min_markers_to_confirm = min_markers_to_confirm
+        self._last_fit: tuple[np.ndarray, dict[int, np.ndarray]] | None = None  # homography, marker centres
+
+    def _kept_homography(self, markers: dict[int, np.ndarray]) -> np.ndarray | None:
+        if self._last_fit is None or self.camera_moved_px is None:
+            return None
+        homography, fitted_on = self._last_fit
+        shifts = [float(np.linalg.norm(markers[i] - fitted_on[i])) for i in markers.keys() & fitted_on.keys()]
+        if len(shifts) < self.min_markers_to_confirm or max(shifts) > self.camera_moved_px:
+            return None
+        return homography
 
     def locate(self, frame: np.ndarray) -> CubeLocalization:
         """Detects markers and cube in ``frame`` (H x W x 3 uint8 BGR) and maps the cube to the robot frame."""
         markers = self.marker_detector.detect(frame)
         missing = tuple(i for i in self.calibration.marker_ids if i not in markers)
         visible = [i for i in self.calibration.marker_ids if i in markers]
-        homography = None
+        homography, kept = None, False
         if len(visible) >= 4:
             homography = fit_homography(
                 np.array([markers[i] for i in visible]), self.calibration.robot_points(visible)
             )
+            self._last_fit = (homography, markers)
+        else:
+            homography = self._kept_homography(markers)
+            kept = homography is not None
         blob = self.blob_detector.detect(frame)
         position = np.full(3, np.nan, np.float32)
         if homography is None:
@@ -299,7 +327,7 @@ class CubeLocator:
             status = PerceptionStatus.OK
             position[:2] = _plane_centroid(homography, blob.contour)
             position[2] = self.calibration.table_height + self.cube_size / 2
-        return CubeLocalization(status, position, markers, missing, blob, homography)
+        return CubeLocalization(status, position, markers, missing, blob, homography, kept)
 
 
 class CubePerception(Transform):
@@ -426,6 +454,8 @@ def draw_perception(frame: np.ndarray, localization: CubeLocalization) -> np.nda
             cv2.putText(canvas, label, (u + 8, v + 18), font, 0.5, _MAGENTA, 1, cv2.LINE_AA)
     if localization.ok:
         status, color = "ok", _GREEN
+        if localization.homography_kept:
+            status = f"ok, markers {list(localization.missing_markers)} hidden, camera unmoved"
     elif localization.status is PerceptionStatus.MARKERS:
         status, color = f"markers missing: {list(localization.missing_markers)}", _RED
     else:
