@@ -2,7 +2,8 @@
 # Copies every comparison run's progress.csv from runs/ to docs/results/comparison/ (same layout), and
 # every learning check's (benchmarks/learning.py, runs/learning/) to docs/results/learning/collectors/,
 # the Sim2Real training's (runs/franka_pick_place-*) to docs/results/sim2real/training/,
-# and commits them, so that finished epochs survive the session. Usage: bash scripts/sync_results.sh [--every SECONDS]
+# and commits them, so that finished epochs survive the session. A shorter CSV never replaces a longer one.
+# Usage: bash scripts/sync_results.sh [--every SECONDS]
 set -uo pipefail
 cd "$(dirname "$0")/.."
 every=0
@@ -16,6 +17,11 @@ sync_once() {
       runs/franka_pick_place-*) dest="docs/results/sim2real/training/${csv#runs/}" ;;
       *) dest="docs/results/comparison/${csv#runs/}" ;;
     esac
+    # A run restarted from epoch 0 (its checkpoint lost with an earlier machine) repeats the committed rows
+    # bit for bit: it replaces them only once it has caught up, so no committed epoch is ever withdrawn.
+    if [ -f "$dest" ] && [ "$(wc -l < "$csv")" -lt "$(wc -l < "$dest")" ]; then
+      continue
+    fi
     if ! cmp -s "$csv" "$dest"; then
       mkdir -p "$(dirname "$dest")" && cp "$csv" "$dest" && changed=1
     fi
