@@ -277,7 +277,11 @@ def test_compare_sim_replays_the_loops_cube_placements_and_goals(monkeypatch, ca
     assert not np.array_equal(loop_cubes[0], loop_cubes[1])  # the stream moves on between episodes
     assert goals[0].tolist() != goals[1].tolist()
     assert report["simulation_success"] in (0.0, 0.5, 1.0) and report["steps"] == 200
-    assert "(plain simulation)" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "(plain simulation)" in out
+    # The scripted grasp truly places the cube, and the loop's own score agrees.
+    assert report["true_success"] == report["camera_loop_success"] == 1.0
+    assert "1.00 by the twin's true cube position" in out
 
 
 def test_compare_sim_needs_the_twin(capsys):
