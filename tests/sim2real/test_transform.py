@@ -48,11 +48,13 @@ class CameraOnlyEnv(EnvBase):
 
 @pytest.fixture
 def frames(tmp_path, calibration):
-    """Recorded frames: cube seen, cube seen, a marker covered, cube gone."""
+    """Recorded frames: cube seen, cube seen, a marker covered, the camera moved with a marker covered, cube gone."""
+    moved = np.array([[420, 40], [620, 260], [300, 470], [30, 180]], np.float32)  # the table's corners in the image
     scenes = [
         render_table_scene(calibration, CUBE_XY),
         degrade(render_table_scene(calibration, CUBE_XY), "all"),
         render_table_scene(calibration, CUBE_XY, occluded_markers=[0]),
+        render_table_scene(calibration, CUBE_XY, occluded_markers=[0], table_corners_px=moved),
         render_table_scene(calibration, None),
     ]
     for i, frame in enumerate(scenes):
@@ -76,16 +78,17 @@ def test_specs_check(frames, calibration):
 
 def test_rollout_writes_position_or_nan_never_stale(frames, calibration):
     env = make_env(frames, calibration, loop=False)
-    # reset reads frame 0, the 3 steps frames 1-3.
-    rollout = env.rollout(3, break_when_any_done=False)
+    # reset reads frame 0, the 4 steps frames 1-4.
+    rollout = env.rollout(4, break_when_any_done=False)
     ok = torch.cat([rollout["perception_ok"][:1], rollout["next", "perception_ok"]])
     status = torch.cat([rollout["perception_status"][:1], rollout["next", "perception_status"]])
     position = torch.cat([rollout["cube_position"][:1], rollout["next", "cube_position"]])
-    assert ok.tolist() == [True, True, False, False]
-    assert [PerceptionStatus(s).reason for s in status.tolist()] == ["ok", "ok", "markers", "cube"]
+    assert ok.tolist() == [True, True, True, False, False]
+    # A covered marker is tolerated while the camera has not moved; once it has, nothing is mapped.
+    assert [PerceptionStatus(s).reason for s in status.tolist()] == ["ok", "ok", "ok", "markers", "cube"]
     expected = torch.tensor([*CUBE_XY, calibration.table_height + 0.025])
-    torch.testing.assert_close(position[:2], expected.expand(2, 3), atol=0.01, rtol=0)
-    assert position[2:].isnan().all()
+    torch.testing.assert_close(position[:3], expected.expand(3, 3), atol=0.01, rtol=0)
+    assert position[3:].isnan().all()
     with pytest.raises(CameraLost):
         env.rand_step(rollout[-1]["next"].clone())
 

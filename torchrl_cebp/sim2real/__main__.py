@@ -1,6 +1,7 @@
 """Sim2Real commands: run a policy through camera -> perception -> robot, calibrate the table, write debug frames.
 
     python -m torchrl_cebp.sim2real run backend=sim episodes=50 compare_sim=true   # the shipped policy, beside plain simulation
+    python -m torchrl_cebp.sim2real run backend=sim episodes=50 side_camera=true   # a second camera beside the table
     python -m torchrl_cebp.sim2real run policy=scripted backend=sim episodes=5
     python -m torchrl_cebp.sim2real run checkpoint=runs/.../seed0 backend=sim episodes=20   # a policy you trained
     python -m torchrl_cebp.sim2real calibrate backend=sim out=table.yaml
@@ -9,7 +10,7 @@
     python -m torchrl_cebp.sim2real perceive frames=debug_frames/raw out=annotated/   # camera only (calibration=FILE)
 
 On hardware (``backend=franky``) ``calibration=`` names the file ``calibrate`` wrote and ``camera=`` the
-OpenCV device (default 0).
+OpenCV device (default 0); ``side_camera=true`` adds ``side_camera_device=`` at ``side_camera_position=``.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from torchrl_cebp.sim2real.calibration import TableCalibration
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource, ImageFolderCamera, OpenCVCamera
 from torchrl_cebp.sim2real.perception import CubeLocator, CubePerception, PerceptionStatus, draw_perception
 from torchrl_cebp.sim2real.policy import SHIPPED_POLICY, ScriptedPickPlace
-from torchrl_cebp.sim2real.real_loop import ParallaxCorrection, RealLoopEnv, SafetyStatus
+from torchrl_cebp.sim2real.real_loop import CameraView, ParallaxCorrection, RealLoopEnv, SafetyStatus
 from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend
 from torchrl_cebp.evaluate import video_path, write_video
 from torchrl_cebp.training import load_policy
@@ -70,13 +71,20 @@ _OPTIONS: dict[str, dict[str, Any]] = {
     "host": {"default": "", "help": "the robot's address (backend=franky)"},
     "camera": {"type": int, "default": 0, "help": "the OpenCV camera device (backend=franky)"},
     "camera_position": {"type": _floats, "default": (), "help": "x,y,z of the camera (parallax of the cube's top face)"},
+    "side_camera": {"type": _boolean, "default": False, "metavar": "BOOL",
+                    "help": "a second camera, beside the table, for where the arm hides the cube from the first"},
+    "side_camera_device": {"type": int, "default": 1, "help": "the side camera's OpenCV device (backend=franky)"},
+    "side_camera_position": {"type": _floats, "default": (), "help": "x,y,z of the side camera (the twin's by default)"},
     "goal": {"type": _floats, "default": (), "help": "x,y,z of a fixed goal (default: drawn per episode)"},
     "out": {"required": True, "help": "where to write"},
     "steps": {"type": int, "default": 40, "help": "steps of the debug episode"},
     "ids": {"default": "0,1,2,3", "help": "the marker ids to jog to, comma-separated"},
     "frames": {"required": True, "help": "a folder of recorded frames"},
 }
-_LOOP = ("backend", "policy", "checkpoint", "seed", "calibration", "host", "camera", "camera_position", "goal")
+_LOOP = (
+    "backend", "policy", "checkpoint", "seed", "calibration", "host", "camera", "camera_position", "side_camera",
+    "side_camera_device", "side_camera_position", "goal",
+)
 _COMMANDS: dict[str, tuple[str, tuple[str, ...], dict[str, Any]]] = {
     "run": ("run a policy through camera, perception and robot", (*_LOOP, "episodes", "compare_sim"), {}),
     "debug": ("one episode, every frame annotated with what the perception saw", (*_LOOP, "out", "steps", "video"),
@@ -137,30 +145,44 @@ def parse_args(argv: Sequence[str]) -> tuple[str, dict[str, Any]]:
     return command, options
 
 
-def build_loop(options: dict[str, Any]) -> tuple[RealLoopEnv, RobotBackend, FrameSource]:
-    """The backend, camera and :class:`RealLoopEnv` an options dict describes (``sim``: the MuJoCo twin)."""
+def _view(camera: FrameSource, calibration: TableCalibration, position: Sequence[float]) -> CameraView:
+    locator = CubeLocator(calibration)
+    parallax = ParallaxCorrection(position, locator.cube_size / 2, calibration.table_height) if position else None
+    return CameraView(camera, CubePerception(locator), parallax)
+
+
+def build_loop(options: dict[str, Any]) -> tuple[RealLoopEnv, RobotBackend]:
+    """The backend and :class:`RealLoopEnv` (with its cameras) an options dict describes (``sim``: the MuJoCo twin)."""
     goal = np.asarray(options["goal"]) if options["goal"] else None
+    views = 1 + options["side_camera"]
     if options["backend"] == "sim":
-        from torchrl_cebp.sim2real.twin import MuJoCoTwinBackend, TwinCamera
+        from torchrl_cebp.sim2real.twin import CAMERA_NAME, SIDE_CAMERA_NAME, MuJoCoTwinBackend, TwinCamera
 
         backend = MuJoCoTwinBackend(seed=options["seed"])
-        camera: FrameSource = TwinCamera(backend)
         calibration = backend.calibration
-        camera_position = options["camera_position"] or tuple(backend.scene.camera_pos)
+        cameras: list[FrameSource] = [TwinCamera(backend, name) for name in (CAMERA_NAME, SIDE_CAMERA_NAME)[:views]]
+        known_positions = [tuple(camera.position) for camera in cameras]
     else:
         if not options["calibration"]:
             raise ValueError("backend=franky needs calibration=FILE (write one with the calibrate command).")
         backend = FrankyBackend(options["host"])
-        camera = OpenCVCamera(options["camera"])
         calibration = TableCalibration.load(options["calibration"])
-        camera_position = options["camera_position"]
-    locator = CubeLocator(calibration)
-    parallax = (
-        ParallaxCorrection(camera_position, locator.cube_size / 2, calibration.table_height) if camera_position else None
+        cameras = [OpenCVCamera(device) for device in (options["camera"], options["side_camera_device"])[:views]]
+        known_positions = [(), ()]  # a real camera's position is only known if given
+    given_positions = (options["camera_position"], options["side_camera_position"])
+    main_view, *more_views = (
+        _view(camera, calibration, given or known) for camera, given, known in zip(cameras, given_positions, known_positions)
     )
-    env = RealLoopEnv(backend, camera, CubePerception(locator), parallax=parallax, goal=goal)
+    env = RealLoopEnv(
+        backend, main_view.camera, main_view.perception, parallax=main_view.parallax, goal=goal, more_views=more_views
+    )
     env.set_seed(options["seed"])
-    return env, backend, camera
+    return env, backend
+
+
+def _close_cameras(env: RealLoopEnv) -> None:
+    for view in env.views:
+        view.camera.close()
 
 
 def _policy(options: dict[str, Any]) -> TensorDictModuleBase:
@@ -200,7 +222,7 @@ def run(options: dict[str, Any]) -> dict[str, Any]:
     camera) on the same cube placement and goal: the summary then sets the loop's success rates beside the
     simulation's.
     """
-    env, backend, camera = build_loop(options)
+    env, backend = build_loop(options)
     policy = _policy(options)
     truth = None
     if options["compare_sim"]:  # backend=sim: parse_args checked it
@@ -227,7 +249,7 @@ def run(options: dict[str, Any]) -> dict[str, Any]:
             sim_successes += sim_success
             line += f" simulation_success={sim_success}"
         print(line, flush=True)
-    camera.close()
+    _close_cameras(env)
     episodes = max(options["episodes"], 1)
     report = {
         "episodes": options["episodes"],
@@ -269,31 +291,36 @@ def calibrate(options: dict[str, Any]) -> TableCalibration:
 def debug(options: dict[str, Any]) -> list[Path]:
     """Runs one episode and writes each camera frame, annotated with what the perception saw, to ``out``.
 
-    The frames as the camera gave them go to ``out/raw`` (replay them with the ``perceive`` command).
+    The frames as the camera gave them go to ``out/raw`` (replay them with the ``perceive`` command); the
+    side camera's, with ``side_camera=true``, to ``out/side`` and ``out/side/raw``, and the video shows both.
     """
     video = video_path(options["video"]) if options["video"] else None  # a bad name fails before the episode
-    env, _, camera = build_loop(options)
+    env, _ = build_loop(options)
     policy = _policy(options)
-    locator = env.perception.locator
     out = Path(options["out"])
-    (out / "raw").mkdir(parents=True, exist_ok=True)
-    written, annotated = [], []
+    folders = [out, out / "side"][: len(env.views)]
+    for folder in folders:
+        (folder / "raw").mkdir(parents=True, exist_ok=True)
+    written, video_frames = [], []
     td = env.reset()
     for step in range(options["steps"]):
-        frame = env.last_frame  # the frame behind the observation the policy acts on, not a second read
-        path = out / f"frame_{step:04d}.png"
-        cv2.imwrite(str(out / "raw" / path.name), frame)
-        annotated.append(draw_perception(frame, locator.locate(frame)))
-        cv2.imwrite(str(path), annotated[-1])
-        written.append(path)
+        name = f"frame_{step:04d}.png"
+        annotated = []
+        # The frames behind the observation the policy acts on, not a second read.
+        for view, folder, frame in zip(env.views, folders, env.last_frames):
+            cv2.imwrite(str(folder / "raw" / name), frame)
+            annotated.append(draw_perception(frame, view.perception.locator.locate(frame)))
+            cv2.imwrite(str(folder / name), annotated[-1])
+        written.append(out / name)
+        video_frames.append(cv2.hconcat(annotated))
         td = env.step(policy(td))
         if bool(td["next", "done"]):
             break
         td = step_mdp(td)
-    camera.close()
-    print(f"wrote {len(written)} annotated frames to {out}")
+    _close_cameras(env)
+    print(f"wrote {len(written)} annotated frames to {', '.join(map(str, folders))}")
     if video is not None:
-        rgb = [cv2.cvtColor(frame, cv2.COLOR_BGR2RGB) for frame in annotated]
+        rgb = [cv2.cvtColor(frame, cv2.COLOR_BGR2RGB) for frame in video_frames]
         print(f"wrote {write_video(rgb, video, fps=round(1 / env.dt))}")
     return written
 

@@ -8,7 +8,7 @@ robot and ends the episode (``safety_status`` = camera lost, ``terminated``).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -24,15 +24,15 @@ from torchrl_cebp.sim2real.camera import CameraLost, FrameSource
 from torchrl_cebp.sim2real.perception import CubePerception, PerceptionStatus
 from torchrl_cebp.sim2real.robot import RobotBackend, RobotState
 
-__all__ = ["ParallaxCorrection", "RealLoopEnv", "SafetyStatus", "Workspace"]
+__all__ = ["CameraView", "ParallaxCorrection", "RealLoopEnv", "SafetyStatus", "Workspace"]
 
 
 class SafetyStatus(IntEnum):
     """Why a step did (0) or did not move the robot; written as ``safety_status``."""
 
     OK = 0
-    MARKERS = 1  # fewer than 4 calibrated markers visible
-    CUBE = 2  # no cube in the image and none in the gripper
+    MARKERS = 1  # no view has its markers (see PerceptionStatus)
+    CUBE = 2  # no view finds the cube, and none is in the gripper
     CAMERA_LOST = 3  # no frame: robot stopped, episode over
     INVALID_ACTION = 4  # NaN or inf in the action
 
@@ -86,6 +86,26 @@ class ParallaxCorrection:
         return out
 
 
+@dataclass(frozen=True)
+class CameraView:
+    """One view of the table: a camera, the perception of its frames, and its viewpoint's parallax correction.
+
+    Example:
+        >>> from torchrl_cebp.sim2real import CubeLocator
+        >>> from torchrl_cebp.sim2real.twin import SIDE_CAMERA_NAME, MuJoCoTwinBackend, TwinCamera
+        >>> backend = MuJoCoTwinBackend(seed=0)
+        >>> side = TwinCamera(backend, SIDE_CAMERA_NAME)
+        >>> view = CameraView(side, CubePerception(CubeLocator(backend.calibration)), ParallaxCorrection(side.position, 0.025))
+        >>> env = RealLoopEnv(backend, TwinCamera(backend), CubePerception(CubeLocator(backend.calibration)), more_views=[view])
+        >>> len(env.views), env.reset()["perception_ok"].item()
+        (2, True)
+    """
+
+    camera: FrameSource
+    perception: CubePerception
+    parallax: Callable[[np.ndarray], np.ndarray] | None = None
+
+
 def fetch_observation(state: RobotState, cube: np.ndarray, previous: tuple[RobotState, np.ndarray] | None, dt: float) -> np.ndarray:
     """The 25-D Fetch observation from the robot state and the cube position (rotation unknown: zero).
 
@@ -126,6 +146,10 @@ class RealLoopEnv(EnvBase):
     While the gripper is closed on something the width of the cube, the cube is where the gripper is:
     a lifted cube is off the table plane the camera measures on.
 
+    With ``more_views`` every camera is read on every step (so that no view's frame is older than the
+    step), and the cube is taken from the first view, in order, that perceives it: the arm that hides it
+    from one camera rarely hides it from a second one placed elsewhere.
+
     Args:
         backend: the robot.
         camera: frame source (BGR).
@@ -133,6 +157,7 @@ class RealLoopEnv(EnvBase):
         workspace: end-effector box and max step.
         layout: goal space, success threshold, episode length and cube size (the Franka sim's).
         parallax: optional correction of the perceived cube position for an oblique camera.
+        more_views: further cameras, each with its own perception and parallax correction.
         goal: a fixed goal; ``None`` samples one per episode like the simulator.
         dt: the simulator's step time, to scale velocities as Fetch does.
 
@@ -155,10 +180,12 @@ class RealLoopEnv(EnvBase):
         parallax: Callable[[np.ndarray], np.ndarray] | None = None,
         goal: np.ndarray | None = None,
         dt: float = 0.04,
+        more_views: Sequence[CameraView] = (),
     ) -> None:
         super().__init__(device="cpu", batch_size=torch.Size([]))
         self.backend, self.camera, self.perception = backend, camera, perception
         self.workspace, self.layout, self.parallax = workspace, layout, parallax
+        self.views = (CameraView(camera, perception, parallax), *more_views)
         self.fixed_goal = None if goal is None else np.asarray(goal, np.float64)
         self.dt = dt
         self.max_episode_steps = layout.max_episode_steps
@@ -185,14 +212,21 @@ class RealLoopEnv(EnvBase):
         self.reward_spec = Unbounded((1,), dtype=torch.float32)
         self.done_spec = Composite(done=flag(), terminated=flag(), truncated=flag())
 
-    def _perceive(self, state: RobotState) -> tuple[np.ndarray, PerceptionStatus]:
-        frame = self.camera.read()
-        self.last_frame = frame  # what the latest observation was perceived from (debug annotates it)
-        td = self.perception(TensorDict(pixels=torch.from_numpy(frame)))
+    @staticmethod
+    def _look(view: CameraView, frame: np.ndarray) -> tuple[np.ndarray, PerceptionStatus]:
+        td = view.perception(TensorDict(pixels=torch.from_numpy(frame)))
         status = PerceptionStatus(int(td["perception_status"]))
         cube = td["cube_position"].numpy().astype(np.float64)
-        if status is PerceptionStatus.OK and self.parallax is not None:
-            cube = self.parallax(cube)
+        if status is PerceptionStatus.OK and view.parallax is not None:
+            cube = view.parallax(cube)
+        return cube, status
+
+    def _perceive(self, state: RobotState) -> tuple[np.ndarray, PerceptionStatus]:
+        # What the latest observation was perceived from, one frame per view (debug annotates them).
+        self.last_frames = tuple(view.camera.read() for view in self.views)
+        self.last_frame = self.last_frames[0]
+        looks = [self._look(view, frame) for view, frame in zip(self.views, self.last_frames)]
+        cube, status = next((look for look in looks if look[1] is PerceptionStatus.OK), looks[0])
         if status is not PerceptionStatus.MARKERS and self._in_gripper(state):
             return state.grip_pos.copy(), PerceptionStatus.OK
         return cube, status

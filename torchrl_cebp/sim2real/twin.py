@@ -1,4 +1,4 @@
-"""The MuJoCo digital twin of the real setup: the Franka scene, ArUco markers on the table, a fixed camera.
+"""The MuJoCo digital twin of the real setup: the Franka scene, ArUco markers on the table, fixed cameras.
 
 The markers are generated with ``cv2.aruco.generateImageMarker`` and written as PNG textures to a cache
 directory at run time, so the twin's camera images go through exactly the perception the real camera
@@ -25,13 +25,15 @@ from torchrl_cebp.sim2real.calibration import TableCalibration, aruco_dictionary
 from torchrl_cebp.sim2real.camera import FrameSource
 from torchrl_cebp.sim2real.robot import RobotBackend, RobotState
 
-__all__ = ["TWIN_CALIBRATION", "MuJoCoTwinBackend", "TwinCamera", "TwinScene", "marker_texture"]
+__all__ = ["SIDE_CAMERA_NAME", "TWIN_CALIBRATION", "MuJoCoTwinBackend", "TwinCamera", "TwinScene", "marker_texture"]
 
 # Outside the cube's and the goal's x/y range (table centre +- 0.1), inside the table (centre +- 0.35 x 0.45).
 TWIN_CALIBRATION = TableCalibration(
     {0: (0.3, -0.35), 1: (0.3, 0.35), 2: (0.75, 0.35), 3: (0.75, -0.35)}, "DICT_4X4_50", table_height=0.0
 )
 CAMERA_NAME = "sim2real_camera"
+# The second view, beside the table: it sees the cube between the fingers where the arm hides it from the first.
+SIDE_CAMERA_NAME = "sim2real_side_camera"
 # An ArUco marker needs a white quiet zone around its black border to be found.
 _QUIET_ZONE = 1.4
 
@@ -61,20 +63,33 @@ def marker_texture(dictionary: str, marker_id: int, pixels: int = 140, cache_dir
     return path
 
 
+def _look_at(position: np.ndarray, target: np.ndarray) -> list[float]:
+    # MuJoCo's camera frame from its x and y axes: x to the image's right, y up, looking along -z.
+    forward = (target - position) / np.linalg.norm(target - position)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    return [*right, *np.cross(right, forward)]
+
+
 class TwinScene:
-    """Adds the markers of a calibration and a fixed camera to the Franka scene (a ``scene_hook``).
+    """Adds the markers of a calibration and two fixed cameras to the Franka scene (a ``scene_hook``).
+
+    The main camera (:data:`CAMERA_NAME`) faces the robot across the table, as in the paper's setup. The
+    side camera (:data:`SIDE_CAMERA_NAME`) looks across the table from the robot's right: a second view,
+    for a loop that must see the cube while the gripper hides it from the first.
 
     Args:
         calibration: marker ids and robot-frame centres (``table_height`` is the table top).
         marker_size: printed marker edge, black border included, metres.
-        camera_pos, camera_target: where the camera is and what it looks at (robot frame).
+        camera_pos, camera_target: where the main camera is and what it looks at (robot frame).
+        side_camera_pos, side_camera_target: the same for the side camera.
         fovy: vertical field of view, degrees.
         image_size: ``(height, width)`` of the rendered frames.
 
     Example:
         >>> env = FrankaPickPlaceEnv(scene_hook=TwinScene(TWIN_CALIBRATION))
-        >>> env.model.camera(CAMERA_NAME).id
-        0
+        >>> env.model.camera(CAMERA_NAME).id, env.model.camera(SIDE_CAMERA_NAME).id
+        (0, 1)
     """
 
     def __init__(
@@ -83,6 +98,8 @@ class TwinScene:
         marker_size: float = 0.08,
         camera_pos: tuple[float, float, float] = (1.25, 0.0, 0.95),
         camera_target: tuple[float, float, float] = (0.5, 0.0, 0.0),
+        side_camera_pos: tuple[float, float, float] = (0.5, -0.85, 1.0),
+        side_camera_target: tuple[float, float, float] = (0.55, 0.0, 0.0),
         fovy: float = 50.0,
         image_size: tuple[int, int] = (360, 480),
     ) -> None:
@@ -90,8 +107,17 @@ class TwinScene:
         self.marker_size = marker_size
         self.camera_pos = np.asarray(camera_pos, np.float64)
         self.camera_target = np.asarray(camera_target, np.float64)
+        self.side_camera_pos = np.asarray(side_camera_pos, np.float64)
+        self.side_camera_target = np.asarray(side_camera_target, np.float64)
         self.fovy = fovy
         self.image_size = image_size
+
+    def camera_position(self, name: str) -> np.ndarray:
+        """Where camera ``name`` (:data:`CAMERA_NAME` or :data:`SIDE_CAMERA_NAME`) is, in the robot frame."""
+        positions = {CAMERA_NAME: self.camera_pos, SIDE_CAMERA_NAME: self.side_camera_pos}
+        if name not in positions:
+            raise ValueError(f"The twin has no camera {name!r}; its cameras: {', '.join(positions)}.")
+        return positions[name]
 
     def __call__(self, spec: mujoco.MjSpec) -> None:
         half = self.marker_size * _QUIET_ZONE / 2
@@ -105,14 +131,11 @@ class TwinScene:
                 name=name, type=mujoco.mjtGeom.mjGEOM_BOX, size=[half, half, 0.0005],
                 pos=[x, y, self.calibration.table_height + 0.0005], material=name, contype=0, conaffinity=0,
             )
-        forward = self.camera_target - self.camera_pos
-        forward /= np.linalg.norm(forward)
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
-        up = np.cross(right, forward)
-        spec.worldbody.add_camera(
-            name=CAMERA_NAME, pos=self.camera_pos.tolist(), xyaxes=[*right, *up], fovy=self.fovy
-        )
+        for name, position, target in (
+            (CAMERA_NAME, self.camera_pos, self.camera_target),
+            (SIDE_CAMERA_NAME, self.side_camera_pos, self.side_camera_target),
+        ):
+            spec.worldbody.add_camera(name=name, pos=position.tolist(), xyaxes=_look_at(position, target), fovy=self.fovy)
         spec.visual.global_.offheight = max(spec.visual.global_.offheight, self.image_size[0])
         spec.visual.global_.offwidth = max(spec.visual.global_.offwidth, self.image_size[1])
 
@@ -225,18 +248,24 @@ class MuJoCoTwinBackend(RobotBackend):
 
 
 class TwinCamera(FrameSource):
-    """Renders the twin's fixed camera: BGR frames, like :class:`~torchrl_cebp.sim2real.camera.OpenCVCamera`'s.
+    """Renders one of the twin's fixed cameras: BGR frames, like :class:`~torchrl_cebp.sim2real.camera.OpenCVCamera`'s.
+
+    Args:
+        backend: the twin.
+        name: :data:`CAMERA_NAME` (the main camera) or :data:`SIDE_CAMERA_NAME`.
 
     Example:
         >>> backend = MuJoCoTwinBackend(seed=0)
         >>> backend.reset()
-        >>> TwinCamera(backend).read().shape
-        (360, 480, 3)
+        >>> TwinCamera(backend).read().shape, TwinCamera(backend, SIDE_CAMERA_NAME).position.tolist()
+        ((360, 480, 3), [0.5, -0.85, 1.0])
     """
 
-    def __init__(self, backend: MuJoCoTwinBackend) -> None:
+    def __init__(self, backend: MuJoCoTwinBackend, name: str = CAMERA_NAME) -> None:
         super().__init__(expected_size=backend.scene.image_size)
         self.backend = backend
+        self.name = name
+        self.position = backend.scene.camera_position(name)
         height, width = backend.scene.image_size
         # MuJoCo's render context frees its GL objects by id in whichever GL context is current when it is
         # destroyed. One left unreachable in a reference cycle (a closed or dropped gymnasium env's
@@ -249,11 +278,11 @@ class TwinCamera(FrameSource):
     def _grab(self) -> np.ndarray | None:
         if self.lost:
             return None
-        self._renderer.update_scene(self.backend.env.data, camera=CAMERA_NAME)
+        self._renderer.update_scene(self.backend.env.data, camera=self.name)
         return cv2.cvtColor(self._renderer.render(), cv2.COLOR_RGB2BGR)
 
     def close(self) -> None:
         self._renderer.close()
 
     def __repr__(self) -> str:
-        return f"TwinCamera({CAMERA_NAME!r})"
+        return f"TwinCamera({self.name!r})"
