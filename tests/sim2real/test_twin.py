@@ -9,10 +9,14 @@ import torch
 from torchrl.envs.utils import check_env_specs, step_mdp
 
 from torchrl_cebp.sim2real import (
+    SIDE_CAMERA_NAME,
     TWIN_CALIBRATION,
+    CameraView,
     CubeLocator,
     CubePerception,
+    ImageFolderCamera,
     MuJoCoTwinBackend,
+    PerceptionStatus,
     ParallaxCorrection,
     RealLoopEnv,
     SafetyStatus,
@@ -21,6 +25,7 @@ from torchrl_cebp.sim2real import (
     TwinCamera,
     Workspace,
     draw_perception,
+    render_table_scene,
 )
 from torchrl_cebp.sim2real.__main__ import main, parse_args, run
 from torchrl_cebp.training import load_policy
@@ -100,6 +105,31 @@ def test_one_hidden_marker_keeps_the_loop_acting_on_an_accurate_cube(loop, twin)
     nxt = td["next"]
     assert nxt["safety_status"].item() == SafetyStatus.OK and nxt["perception_ok"].item()
     assert np.linalg.norm(nxt["cube_position"].numpy() - backend.cube_position()) < 0.01
+
+
+def test_a_side_camera_finds_the_cube_the_main_camera_lost(intact_twin, tmp_path):
+    backend, _ = intact_twin
+    # The main camera sees the markers and no cube: recorded frames of the empty table.
+    cv2.imwrite(str(tmp_path / "frame_000.png"), render_table_scene(TWIN_CALIBRATION, None))
+    blind = ImageFolderCamera(tmp_path, loop=True)
+    alone = RealLoopEnv(backend, blind, CubePerception(CubeLocator(backend.calibration)))
+    assert alone.reset()["perception_status"].item() == PerceptionStatus.CUBE
+    side = TwinCamera(backend, SIDE_CAMERA_NAME)
+    view = CameraView(side, CubePerception(CubeLocator(backend.calibration)), ParallaxCorrection(side.position, 0.025))
+    env = RealLoopEnv(backend, blind, CubePerception(CubeLocator(backend.calibration)), more_views=[view])
+    td = env.reset()
+    assert td["perception_ok"].item() and len(env.last_frames) == 2
+    assert np.linalg.norm(td["cube_position"].numpy() - backend.cube_position()) < 0.01
+    side.close()
+
+
+def test_debug_with_the_side_camera_writes_both_views(tmp_path):
+    import imageio.v3 as iio
+
+    assert main(["debug", f"out={tmp_path}", "steps=2", "side_camera=true", f"video={tmp_path / 'both.mp4'}"]) == 0
+    main_frame, side_frame = (cv2.imread(str(folder / "frame_0001.png")) for folder in (tmp_path, tmp_path / "side"))
+    assert (tmp_path / "side" / "raw" / "frame_0001.png").exists() and (main_frame != side_frame).any()
+    assert iio.imread(tmp_path / "both.mp4").shape[1:3] == (main_frame.shape[0], 2 * main_frame.shape[1])
 
 
 def test_markers_hidden_holds_still_with_reason(loop, twin):
