@@ -9,6 +9,7 @@ import torch
 from torchrl.envs.utils import check_env_specs, step_mdp
 
 from torchrl_cebp.sim2real import (
+    SHIPPED_POLICY,
     SIDE_CAMERA_NAME,
     TWIN_CALIBRATION,
     CameraView,
@@ -27,7 +28,7 @@ from torchrl_cebp.sim2real import (
     draw_perception,
     render_table_scene,
 )
-from torchrl_cebp.sim2real.__main__ import main, parse_args, run
+from torchrl_cebp.sim2real.__main__ import build_loop, main, parse_args, run
 from torchrl_cebp.training import load_policy
 
 
@@ -130,6 +131,25 @@ def test_debug_with_the_side_camera_writes_both_views(tmp_path):
     main_frame, side_frame = (cv2.imread(str(folder / "frame_0001.png")) for folder in (tmp_path, tmp_path / "side"))
     assert (tmp_path / "side" / "raw" / "frame_0001.png").exists() and (main_frame != side_frame).any()
     assert iio.imread(tmp_path / "both.mp4").shape[1:3] == (main_frame.shape[0], 2 * main_frame.shape[1])
+
+
+def test_gripper_closed_beside_the_cube_does_not_carry_it():
+    # Episode 11 of seed 0: the shipped policy closes its fingers to the cube's width beside the cube and
+    # moves on. The loop used to take the cube for held and let it travel with the gripper, 8 cm from where
+    # it truly lay; the cameras, which still see it on the table, now overrule the gripper.
+    env, backend = build_loop(parse_args(["run", "backend=sim", "side_camera=true"])[1])
+    policy = load_policy(SHIPPED_POLICY)
+    for _ in range(11):
+        env.reset()  # the placements and goals of episodes 0-10, without running them
+    td, errors = env.reset(), []
+    with torch.no_grad():
+        for _ in range(12):
+            td = env.step(policy(td))
+            errors.append(np.linalg.norm(td["next", "cube_position"].numpy() - backend.cube_position()))
+            td = step_mdp(td)
+    assert max(errors) < env.layout.cube_size, np.round(errors, 3)
+    for view in env.views:
+        view.camera.close()
 
 
 def test_markers_hidden_holds_still_with_reason(loop, twin):

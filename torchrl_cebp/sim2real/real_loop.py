@@ -78,12 +78,28 @@ class ParallaxCorrection:
 
     def __init__(self, camera_position: tuple[float, float, float], height: float, table_height: float = 0.0) -> None:
         self.camera = np.asarray(camera_position, np.float64)
+        self.table_height = float(table_height)
         self.scale = 1.0 - height / (self.camera[2] - table_height)
 
     def __call__(self, position: np.ndarray) -> np.ndarray:
         out = np.asarray(position, np.float64).copy()
         out[:2] = self.camera[:2] + (out[:2] - self.camera[:2]) * self.scale
         return out
+
+    def ray_distance(self, position: np.ndarray, point: np.ndarray) -> float:
+        """How far ``point`` lies from the camera ray through ``position``'s table-plane image (metres).
+
+        Whatever its height, what the camera saw at ``position`` lies on that ray: a cube held off the table
+        is on it, and a gripper far from it holds no cube the camera sees.
+
+        Example:
+            >>> fix = ParallaxCorrection(camera_position=(1.0, 0.0, 1.0), height=0.5, table_height=0.0)
+            >>> fix.ray_distance(np.array([0.0, 0.0, 0.5]), np.array([0.5, 0.0, 0.5])), fix.ray_distance(np.array([0.0, 0.0, 0.5]), np.array([0.5, 0.2, 0.5]))
+            (0.0, 0.2)
+        """
+        on_table = np.array([position[0], position[1], self.table_height], np.float64)
+        direction = (on_table - self.camera) / np.linalg.norm(on_table - self.camera)
+        return float(np.linalg.norm(np.cross(np.asarray(point, np.float64) - self.camera, direction)))
 
 
 @dataclass(frozen=True)
@@ -144,7 +160,8 @@ class RealLoopEnv(EnvBase):
     is not perceived the cube entries of ``observation`` are NaN, so nothing downstream can act on a stale one.
 
     While the gripper is closed on something the width of the cube, the cube is where the gripper is:
-    a lifted cube is off the table plane the camera measures on.
+    a lifted cube is off the table plane the camera measures on. Unless a camera sees the cube along a ray
+    that passes more than a cube's width from the gripper: then the gripper closed beside the cube, not on it.
 
     With ``more_views`` every camera is read on every step (so that no view's frame is older than the
     step), and the cube is taken from the first view, in order, that perceives it: the arm that hides it
@@ -213,29 +230,34 @@ class RealLoopEnv(EnvBase):
         self.done_spec = Composite(done=flag(), terminated=flag(), truncated=flag())
 
     @staticmethod
-    def _look(view: CameraView, frame: np.ndarray) -> tuple[np.ndarray, PerceptionStatus]:
+    def _look(view: CameraView, frame: np.ndarray) -> tuple[PerceptionStatus, np.ndarray, np.ndarray]:
+        # The status, the cube as mapped onto the table plane, and the cube corrected for its height.
         td = view.perception(TensorDict(pixels=torch.from_numpy(frame)))
         status = PerceptionStatus(int(td["perception_status"]))
-        cube = td["cube_position"].numpy().astype(np.float64)
-        if status is PerceptionStatus.OK and view.parallax is not None:
-            cube = view.parallax(cube)
-        return cube, status
+        on_plane = td["cube_position"].numpy().astype(np.float64)
+        ok = status is PerceptionStatus.OK and view.parallax is not None
+        return status, on_plane, view.parallax(on_plane) if ok else on_plane
 
     def _perceive(self, state: RobotState) -> tuple[np.ndarray, PerceptionStatus]:
         # What the latest observation was perceived from, one frame per view (debug annotates them).
         self.last_frames = tuple(view.camera.read() for view in self.views)
         self.last_frame = self.last_frames[0]
         looks = [self._look(view, frame) for view, frame in zip(self.views, self.last_frames)]
-        cube, status = next((look for look in looks if look[1] is PerceptionStatus.OK), looks[0])
-        if status is not PerceptionStatus.MARKERS and self._in_gripper(state):
+        status, _, cube = next((look for look in looks if look[0] is PerceptionStatus.OK), looks[0])
+        sightings = [(view.parallax, on_plane) for view, (seen, on_plane, _) in zip(self.views, looks) if seen is PerceptionStatus.OK]
+        if status is not PerceptionStatus.MARKERS and self._in_gripper(state, sightings):
             return state.grip_pos.copy(), PerceptionStatus.OK
         return cube, status
 
-    def _in_gripper(self, state: RobotState) -> bool:
-        # Closed on the cube: narrower than open, wider than empty, and the cube was at the fingers last step.
+    def _in_gripper(self, state: RobotState, sightings: list[tuple[ParallaxCorrection | None, np.ndarray]]) -> bool:
+        # Closed on the cube: narrower than open, wider than empty, and the cube was at the fingers last step;
+        # and no camera that sees the cube sees it off the gripper (a cube left behind on the table).
         width, size = state.gripper_width, self.layout.cube_size
         near = self._previous is not None and np.linalg.norm(self._previous[1] - self._previous[0].grip_pos) < size / 2
-        return near and 0.6 * size < width < 1.2 * size
+        seen_elsewhere = any(
+            parallax is not None and parallax.ray_distance(seen, state.grip_pos) > size for parallax, seen in sightings
+        )
+        return near and 0.6 * size < width < 1.2 * size and not seen_elsewhere
 
     def _observe(self, safety: SafetyStatus, clamped: bool) -> dict[str, torch.Tensor]:
         state = self.backend.state()
