@@ -31,8 +31,8 @@ class SafetyStatus(IntEnum):
     """Why a step did (0) or did not move the robot; written as ``safety_status``."""
 
     OK = 0
-    MARKERS = 1  # no view has its markers (see PerceptionStatus)
-    CUBE = 2  # no view finds the cube, and none is in the gripper
+    MARKERS = 1  # no view perceives the cube, and the first camera lacks its markers (see PerceptionStatus)
+    CUBE = 2  # no view perceives the cube, the first camera has its markers, and no cube is in the gripper
     CAMERA_LOST = 3  # no frame: robot stopped, episode over
     INVALID_ACTION = 4  # NaN or inf in the action
 
