@@ -3,8 +3,8 @@
 Two figures per camera, the main one (facing the robot, the paper's setup) and the side one (``side_camera=true``):
   * cube alone: the twin resets to ``--placements`` random cube placements; the error is the distance between the
     perceived cube (parallax-corrected) and the simulated cube;
-  * during the shipped policy's camera-loop episodes (``--episodes``, both cameras, seed 0): on every step, whether
-    each camera perceived the cube, and the side camera's error on the steps the main camera lost it.
+  * during the shipped policy's camera-loop episodes (``--episodes``, both cameras, seed 0): how many steps the main
+    camera lost the cube or its markers, and the side camera's error on those steps.
 
 Example:
     $ python benchmarks/sim2real_perception.py --placements 60 --episodes 3
@@ -19,24 +19,20 @@ import torch
 from torchrl.envs.utils import step_mdp
 
 from torchrl_cebp.sim2real import (
+    CAMERA_NAME,
     SHIPPED_POLICY,
     SIDE_CAMERA_NAME,
     CameraView,
-    CubeLocator,
-    CubePerception,
     MuJoCoTwinBackend,
-    ParallaxCorrection,
     RealLoopEnv,
     TwinCamera,
 )
-from torchrl_cebp.sim2real.twin import CAMERA_NAME
 from torchrl_cebp.training import load_policy
 
 
 def _view(backend: MuJoCoTwinBackend, name: str) -> CameraView:
     camera = TwinCamera(backend, name)
-    locator = CubeLocator(backend.calibration)
-    return CameraView(camera, CubePerception(locator), ParallaxCorrection(camera.position, locator.cube_size / 2))
+    return CameraView.calibrated(camera, backend.calibration, camera.position)
 
 
 def _error(view: CameraView, backend: MuJoCoTwinBackend) -> float:

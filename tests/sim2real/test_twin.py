@@ -116,11 +116,16 @@ def test_a_side_camera_finds_the_cube_the_main_camera_lost(intact_twin, tmp_path
     alone = RealLoopEnv(backend, blind, CubePerception(CubeLocator(backend.calibration)))
     assert alone.reset()["perception_status"].item() == PerceptionStatus.CUBE
     side = TwinCamera(backend, SIDE_CAMERA_NAME)
-    view = CameraView(side, CubePerception(CubeLocator(backend.calibration)), ParallaxCorrection(side.position, 0.025))
+    view = CameraView.calibrated(side, backend.calibration, side.position)
     env = RealLoopEnv(backend, blind, CubePerception(CubeLocator(backend.calibration)), more_views=[view])
     td = env.reset()
     assert td["perception_ok"].item() and len(env.last_frames) == 2
     assert np.linalg.norm(td["cube_position"].numpy() - backend.cube_position()) < 0.01
+    # Where the camera is not known, its view is not corrected for the cube's height: still found, less exactly.
+    uncorrected = CameraView.calibrated(side, backend.calibration)
+    assert uncorrected.parallax is None
+    env = RealLoopEnv(backend, blind, CubePerception(CubeLocator(backend.calibration)), more_views=[uncorrected])
+    assert 0.01 < np.linalg.norm(env.reset()["cube_position"].numpy() - backend.cube_position()) < 0.05
     side.close()
 
 

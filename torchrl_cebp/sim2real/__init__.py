@@ -20,9 +20,10 @@ from torchrl_cebp.sim2real.policy import SHIPPED_POLICY, ScriptedPickPlace
 from torchrl_cebp.sim2real.real_loop import CameraView, ParallaxCorrection, RealLoopEnv, SafetyStatus, Workspace
 from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend, RobotState
 from torchrl_cebp.sim2real.synthetic import render_table_scene
-from torchrl_cebp.sim2real.twin import SIDE_CAMERA_NAME, TWIN_CALIBRATION, MuJoCoTwinBackend, TwinCamera, TwinScene
+from torchrl_cebp.sim2real.twin import CAMERA_NAME, SIDE_CAMERA_NAME, TWIN_CALIBRATION, MuJoCoTwinBackend, TwinCamera, TwinScene
 
 __all__ = [
+    "CAMERA_NAME",
     "RED_HSV_RANGES",
     "SHIPPED_POLICY",
     "SIDE_CAMERA_NAME",

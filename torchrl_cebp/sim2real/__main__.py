@@ -31,9 +31,9 @@ from torchrl.envs.utils import step_mdp
 
 from torchrl_cebp.sim2real.calibration import TableCalibration
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource, ImageFolderCamera, OpenCVCamera
-from torchrl_cebp.sim2real.perception import CubeLocator, CubePerception, PerceptionStatus, draw_perception
+from torchrl_cebp.sim2real.perception import CubeLocator, PerceptionStatus, draw_perception
 from torchrl_cebp.sim2real.policy import SHIPPED_POLICY, ScriptedPickPlace
-from torchrl_cebp.sim2real.real_loop import CameraView, ParallaxCorrection, RealLoopEnv, SafetyStatus
+from torchrl_cebp.sim2real.real_loop import CameraView, RealLoopEnv, SafetyStatus
 from torchrl_cebp.sim2real.robot import FrankyBackend, RobotBackend
 from torchrl_cebp.evaluate import video_path, write_video
 from torchrl_cebp.training import load_policy
@@ -145,12 +145,6 @@ def parse_args(argv: Sequence[str]) -> tuple[str, dict[str, Any]]:
     return command, options
 
 
-def _view(camera: FrameSource, calibration: TableCalibration, position: Sequence[float]) -> CameraView:
-    locator = CubeLocator(calibration)
-    parallax = ParallaxCorrection(position, locator.cube_size / 2, calibration.table_height) if position else None
-    return CameraView(camera, CubePerception(locator), parallax)
-
-
 def build_loop(options: dict[str, Any]) -> tuple[RealLoopEnv, RobotBackend]:
     """The backend and :class:`RealLoopEnv` (with its cameras) an options dict describes (``sim``: the MuJoCo twin)."""
     goal = np.asarray(options["goal"]) if options["goal"] else None
@@ -171,13 +165,20 @@ def build_loop(options: dict[str, Any]) -> tuple[RealLoopEnv, RobotBackend]:
         known_positions = [(), ()]  # a real camera's position is only known if given
     given_positions = (options["camera_position"], options["side_camera_position"])
     main_view, *more_views = (
-        _view(camera, calibration, given or known) for camera, given, known in zip(cameras, given_positions, known_positions)
+        CameraView.calibrated(camera, calibration, given or known)
+        for camera, given, known in zip(cameras, given_positions, known_positions)
     )
     env = RealLoopEnv(
         backend, main_view.camera, main_view.perception, parallax=main_view.parallax, goal=goal, more_views=more_views
     )
     env.set_seed(options["seed"])
     return env, backend
+
+
+def _side_by_side(frames: list[np.ndarray]) -> np.ndarray:
+    # Two real cameras need not share a resolution: scale every frame to the first one's height.
+    height = frames[0].shape[0]
+    return cv2.hconcat([cv2.resize(f, (round(f.shape[1] * height / f.shape[0]), height)) for f in frames])
 
 
 def _close_cameras(env: RealLoopEnv) -> None:
@@ -223,38 +224,41 @@ def run(options: dict[str, Any]) -> dict[str, Any]:
     simulation's.
     """
     env, backend = build_loop(options)
-    policy = _policy(options)
-    truth = None
-    if options["compare_sim"]:  # backend=sim: parse_args checked it
-        from torchrl_cebp.sim2real.twin import MuJoCoTwinBackend
+    knows_truth = hasattr(backend, "cube_position")  # the twin knows where the cube truly is; a real robot does not
+    try:
+        policy = _policy(options)
+        truth = None
+        if options["compare_sim"]:  # backend=sim: parse_args checked it
+            from torchrl_cebp.sim2real.twin import MuJoCoTwinBackend
 
-        truth = MuJoCoTwinBackend(seed=options["seed"])
-    loop_successes, true_successes, sim_successes, held, steps = 0, 0, 0, Counter(), 0
-    threshold = env.layout.distance_threshold
-    for episode in range(options["episodes"]):
-        td = env.rollout(env.max_episode_steps, policy, break_when_any_done=True)
-        success = bool(td["next", "is_success"][-1])
-        loop_successes += success
-        episode_held = held_steps(td)
-        held, steps = held + episode_held, steps + td.shape[0]
-        goal = td["desired_goal"][0].numpy()  # one goal per episode
-        line = (f"episode {episode}: success={success} steps={td.shape[0]} held={dict(episode_held) or 0} "
-                f"goal={[round(v, 3) for v in goal.tolist()]}")
-        if hasattr(backend, "cube_position"):  # the twin knows where the cube truly is; a real robot does not
-            true_distance = float(np.linalg.norm(backend.cube_position() - goal))
-            true_successes += true_distance <= threshold
-            line += f" true_goal_distance={true_distance:.3f} m"
-        if truth is not None:
-            sim_success = truth.simulate(policy, goal)
-            sim_successes += sim_success
-            line += f" simulation_success={sim_success}"
-        print(line, flush=True)
-    _close_cameras(env)
+            truth = MuJoCoTwinBackend(seed=options["seed"])
+        loop_successes, true_successes, sim_successes, held, steps = 0, 0, 0, Counter(), 0
+        threshold = env.layout.distance_threshold
+        for episode in range(options["episodes"]):
+            td = env.rollout(env.max_episode_steps, policy, break_when_any_done=True)
+            success = bool(td["next", "is_success"][-1])
+            loop_successes += success
+            episode_held = held_steps(td)
+            held, steps = held + episode_held, steps + td.shape[0]
+            goal = td["desired_goal"][0].numpy()  # one goal per episode
+            line = (f"episode {episode}: success={success} steps={td.shape[0]} held={dict(episode_held) or 0} "
+                    f"goal={[round(v, 3) for v in goal.tolist()]}")
+            if knows_truth:
+                true_distance = float(np.linalg.norm(backend.cube_position() - goal))
+                true_successes += true_distance <= threshold
+                line += f" true_goal_distance={true_distance:.3f} m"
+            if truth is not None:
+                sim_success = truth.simulate(policy, goal)
+                sim_successes += sim_success
+                line += f" simulation_success={sim_success}"
+            print(line, flush=True)
+    finally:
+        _close_cameras(env)
     episodes = max(options["episodes"], 1)
     report = {
         "episodes": options["episodes"],
         "camera_loop_success": loop_successes / episodes,
-        "true_success": true_successes / episodes if hasattr(backend, "cube_position") else None,
+        "true_success": true_successes / episodes if knows_truth else None,
         "simulation_success": None if truth is None else sim_successes / episodes,
         "steps": steps,
         "held_steps": dict(held),
@@ -296,28 +300,30 @@ def debug(options: dict[str, Any]) -> list[Path]:
     """
     video = video_path(options["video"]) if options["video"] else None  # a bad name fails before the episode
     env, _ = build_loop(options)
-    policy = _policy(options)
-    out = Path(options["out"])
-    folders = [out, out / "side"][: len(env.views)]
-    for folder in folders:
-        (folder / "raw").mkdir(parents=True, exist_ok=True)
-    written, video_frames = [], []
-    td = env.reset()
-    for step in range(options["steps"]):
-        name = f"frame_{step:04d}.png"
-        annotated = []
-        # The frames behind the observation the policy acts on, not a second read.
-        for view, folder, frame in zip(env.views, folders, env.last_frames):
-            cv2.imwrite(str(folder / "raw" / name), frame)
-            annotated.append(draw_perception(frame, view.perception.locator.locate(frame)))
-            cv2.imwrite(str(folder / name), annotated[-1])
-        written.append(out / name)
-        video_frames.append(cv2.hconcat(annotated))
-        td = env.step(policy(td))
-        if bool(td["next", "done"]):
-            break
-        td = step_mdp(td)
-    _close_cameras(env)
+    try:
+        policy = _policy(options)
+        out = Path(options["out"])
+        folders = [out, out / "side"][: len(env.views)]
+        for folder in folders:
+            (folder / "raw").mkdir(parents=True, exist_ok=True)
+        written, video_frames = [], []
+        td = env.reset()
+        for step in range(options["steps"]):
+            name = f"frame_{step:04d}.png"
+            annotated = []
+            # The frames behind the observation the policy acts on, not a second read.
+            for view, folder, frame in zip(env.views, folders, env.last_frames):
+                cv2.imwrite(str(folder / "raw" / name), frame)
+                annotated.append(draw_perception(frame, view.perception.locator.locate(frame)))
+                cv2.imwrite(str(folder / name), annotated[-1])
+            written.append(out / name)
+            video_frames.append(_side_by_side(annotated))
+            td = env.step(policy(td))
+            if bool(td["next", "done"]):
+                break
+            td = step_mdp(td)
+    finally:
+        _close_cameras(env)
     print(f"wrote {len(written)} annotated frames to {', '.join(map(str, folders))}")
     if video is not None:
         rgb = [cv2.cvtColor(frame, cv2.COLOR_BGR2RGB) for frame in video_frames]

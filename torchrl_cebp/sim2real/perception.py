@@ -215,8 +215,8 @@ class CubeLocalization:
     """What :meth:`CubeLocator.locate` saw in one frame.
 
     ``position`` is the robot-frame cube centre (float32 ``[3]``), all NaN unless ``status`` is OK; the
-    other fields are kept whatever the status, for the debug drawing. ``homography_kept`` says that some
-    markers were hidden and the homography is the one last fitted on all of them (the camera had not moved).
+    other fields are kept whatever the status, for the debug drawing. ``homography_kept`` says that fewer
+    than 4 markers were seen and the homography is the one last fitted on at least 4 (the camera had not moved).
     """
 
     status: PerceptionStatus
@@ -253,7 +253,8 @@ class CubeLocator:
     bumped camera is followed rather than silently mis-mapping. When the arm hides markers and fewer than
     4 are seen, the homography last fitted is kept, but only while at least ``min_markers_to_confirm`` of
     the visible markers sit within ``camera_moved_px`` pixels of where they were then: a fixed camera that
-    has not moved maps the table as before, and a moved one is caught by the markers it still sees.
+    has not moved maps the table as before, and a moved one is caught by the markers it still sees. That
+    memory belongs to one camera: give each camera its own locator.
 
     Args:
         calibration: the markers' robot-frame positions, dictionary and table height.

@@ -8,7 +8,7 @@ robot and ends the episode (``safety_status`` = camera lost, ``terminated``).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -21,7 +21,8 @@ from torchrl.envs import EnvBase
 from torchrl_cebp.envs.franka import FrankaLayout, sample_goal
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource
-from torchrl_cebp.sim2real.perception import CubePerception, PerceptionStatus
+from torchrl_cebp.sim2real.calibration import TableCalibration
+from torchrl_cebp.sim2real.perception import CubeLocator, CubePerception, PerceptionStatus
 from torchrl_cebp.sim2real.robot import RobotBackend, RobotState
 
 __all__ = ["CameraView", "ParallaxCorrection", "RealLoopEnv", "SafetyStatus", "Workspace"]
@@ -32,7 +33,7 @@ class SafetyStatus(IntEnum):
 
     OK = 0
     MARKERS = 1  # no view perceives the cube, and the first camera lacks its markers (see PerceptionStatus)
-    CUBE = 2  # no view perceives the cube, the first camera has its markers, and no cube is in the gripper
+    CUBE = 2  # no view perceives the cube, the first camera has its markers, and none is in the gripper
     CAMERA_LOST = 3  # no frame: robot stopped, episode over
     INVALID_ACTION = 4  # NaN or inf in the action
 
@@ -106,12 +107,16 @@ class ParallaxCorrection:
 class CameraView:
     """One view of the table: a camera, the perception of its frames, and its viewpoint's parallax correction.
 
+    Each view needs its own :class:`~torchrl_cebp.sim2real.perception.CubeLocator`: the locator remembers its
+    camera's last homography. Without a parallax correction (camera position unknown) a view's cube is not
+    corrected for its height, and the view cannot overrule the in-gripper rule of :class:`RealLoopEnv`.
+
     Example:
         >>> from torchrl_cebp.sim2real import CubeLocator
         >>> from torchrl_cebp.sim2real.twin import SIDE_CAMERA_NAME, MuJoCoTwinBackend, TwinCamera
         >>> backend = MuJoCoTwinBackend(seed=0)
         >>> side = TwinCamera(backend, SIDE_CAMERA_NAME)
-        >>> view = CameraView(side, CubePerception(CubeLocator(backend.calibration)), ParallaxCorrection(side.position, 0.025))
+        >>> view = CameraView.calibrated(side, backend.calibration, side.position)
         >>> env = RealLoopEnv(backend, TwinCamera(backend), CubePerception(CubeLocator(backend.calibration)), more_views=[view])
         >>> len(env.views), env.reset()["perception_ok"].item()
         (2, True)
@@ -119,7 +124,20 @@ class CameraView:
 
     camera: FrameSource
     perception: CubePerception
-    parallax: Callable[[np.ndarray], np.ndarray] | None = None
+    parallax: ParallaxCorrection | None = None
+
+    @classmethod
+    def calibrated(
+        cls, camera: FrameSource, calibration: TableCalibration, camera_position: Sequence[float] | None = None
+    ) -> CameraView:
+        """The view of ``camera`` through a fresh locator of ``calibration``, parallax-corrected when the camera's
+        robot-frame position is known."""
+        locator = CubeLocator(calibration)
+        known = camera_position is not None and len(camera_position) > 0
+        if known and len(camera_position) != 3:
+            raise ValueError(f"A camera position is x, y, z in the robot frame, got {tuple(camera_position)}.")
+        parallax = ParallaxCorrection(camera_position, locator.cube_size / 2, calibration.table_height) if known else None
+        return cls(camera, CubePerception(locator), parallax)
 
 
 def fetch_observation(state: RobotState, cube: np.ndarray, previous: tuple[RobotState, np.ndarray] | None, dt: float) -> np.ndarray:
@@ -160,8 +178,9 @@ class RealLoopEnv(EnvBase):
     is not perceived the cube entries of ``observation`` are NaN, so nothing downstream can act on a stale one.
 
     While the gripper is closed on something the width of the cube, the cube is where the gripper is:
-    a lifted cube is off the table plane the camera measures on. Unless a camera sees the cube along a ray
-    that passes more than a cube's width from the gripper: then the gripper closed beside the cube, not on it.
+    a lifted cube is off the table plane the camera measures on. Unless a camera with a parallax correction
+    sees the cube along a ray that passes more than a cube's width from the gripper: then the gripper closed
+    beside the cube, not on it.
 
     With ``more_views`` every camera is read on every step (so that no view's frame is older than the
     step), and the cube is taken from the first view, in order, that perceives it: the arm that hides it
@@ -194,7 +213,7 @@ class RealLoopEnv(EnvBase):
         perception: CubePerception,
         workspace: Workspace = Workspace(),
         layout: FrankaLayout = FrankaLayout(),
-        parallax: Callable[[np.ndarray], np.ndarray] | None = None,
+        parallax: ParallaxCorrection | None = None,
         goal: np.ndarray | None = None,
         dt: float = 0.04,
         more_views: Sequence[CameraView] = (),
@@ -235,8 +254,8 @@ class RealLoopEnv(EnvBase):
         td = view.perception(TensorDict(pixels=torch.from_numpy(frame)))
         status = PerceptionStatus(int(td["perception_status"]))
         on_plane = td["cube_position"].numpy().astype(np.float64)
-        ok = status is PerceptionStatus.OK and view.parallax is not None
-        return status, on_plane, view.parallax(on_plane) if ok else on_plane
+        correct = status is PerceptionStatus.OK and view.parallax is not None
+        return status, on_plane, view.parallax(on_plane) if correct else on_plane
 
     def _perceive(self, state: RobotState) -> tuple[np.ndarray, PerceptionStatus]:
         # What the latest observation was perceived from, one frame per view (debug annotates them).
@@ -245,7 +264,9 @@ class RealLoopEnv(EnvBase):
         looks = [self._look(view, frame) for view, frame in zip(self.views, self.last_frames)]
         status, _, cube = next((look for look in looks if look[0] is PerceptionStatus.OK), looks[0])
         sightings = [(view.parallax, on_plane) for view, (seen, on_plane, _) in zip(self.views, looks) if seen is PerceptionStatus.OK]
-        if status is not PerceptionStatus.MARKERS and self._in_gripper(state, sightings):
+        # The gripper's word needs a camera that sees its markers: one that does not may have been moved.
+        with_markers = any(seen is not PerceptionStatus.MARKERS for seen, _, _ in looks)
+        if with_markers and self._in_gripper(state, sightings):
             return state.grip_pos.copy(), PerceptionStatus.OK
         return cube, status
 

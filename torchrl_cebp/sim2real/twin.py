@@ -25,7 +25,7 @@ from torchrl_cebp.sim2real.calibration import TableCalibration, aruco_dictionary
 from torchrl_cebp.sim2real.camera import FrameSource
 from torchrl_cebp.sim2real.robot import RobotBackend, RobotState
 
-__all__ = ["SIDE_CAMERA_NAME", "TWIN_CALIBRATION", "MuJoCoTwinBackend", "TwinCamera", "TwinScene", "marker_texture"]
+__all__ = ["CAMERA_NAME", "SIDE_CAMERA_NAME", "TWIN_CALIBRATION", "MuJoCoTwinBackend", "TwinCamera", "TwinScene", "marker_texture"]
 
 # Outside the cube's and the goal's x/y range (table centre +- 0.1), inside the table (centre +- 0.35 x 0.45).
 TWIN_CALIBRATION = TableCalibration(
@@ -117,7 +117,7 @@ class TwinScene:
         positions = {CAMERA_NAME: self.camera_pos, SIDE_CAMERA_NAME: self.side_camera_pos}
         if name not in positions:
             raise ValueError(f"The twin has no camera {name!r}; its cameras: {', '.join(positions)}.")
-        return positions[name]
+        return positions[name].copy()
 
     def __call__(self, spec: mujoco.MjSpec) -> None:
         half = self.marker_size * _QUIET_ZONE / 2
