@@ -219,8 +219,7 @@ class RealLoopEnv(EnvBase):
         more_views: Sequence[CameraView] = (),
     ) -> None:
         super().__init__(device="cpu", batch_size=torch.Size([]))
-        self.backend, self.camera, self.perception = backend, camera, perception
-        self.workspace, self.layout, self.parallax = workspace, layout, parallax
+        self.backend, self.workspace, self.layout = backend, workspace, layout
         self.views = (CameraView(camera, perception, parallax), *more_views)
         self.fixed_goal = None if goal is None else np.asarray(goal, np.float64)
         self.dt = dt
@@ -260,7 +259,6 @@ class RealLoopEnv(EnvBase):
     def _perceive(self, state: RobotState) -> tuple[np.ndarray, PerceptionStatus]:
         # What the latest observation was perceived from, one frame per view (debug annotates them).
         self.last_frames = tuple(view.camera.read() for view in self.views)
-        self.last_frame = self.last_frames[0]
         looks = [self._look(view, frame) for view, frame in zip(self.views, self.last_frames)]
         status, _, cube = next((look for look in looks if look[0] is PerceptionStatus.OK), looks[0])
         sightings = [(view.parallax, on_plane) for view, (seen, on_plane, _) in zip(self.views, looks) if seen is PerceptionStatus.OK]
