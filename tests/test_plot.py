@@ -112,3 +112,19 @@ def test_table_probability_of_improvement_over_her(tmp_path, capsys):
     assert "(baseline)" in rows["her"]
     with pytest.raises(SystemExit):
         main([str(tmp_path), "--improvement-at", "2"])
+
+
+def test_table_probability_of_improvement_at_several_epochs(tmp_path, capsys):
+    # her leads after 1 epoch in every pair, cebp after 2 in all but one tie: one column per epoch asked for
+    for seed, (her, cebp) in enumerate([((0.2, 0.1), (0.1, 0.3)), ((0.3, 0.2), (0.0, 0.2)), ((0.4, 0.4), (0.1,))]):
+        write_run(tmp_path / f"push-extended/her/paper/seed{seed}", her)
+        write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", cebp)
+    main([str(tmp_path), "--table", "2", "--improvement-at", "1", "2"])
+    out = capsys.readouterr().out
+    assert "| after 2 epochs | P(> her) after 1 epoch | P(> her) after 2 epochs | training hours |" in out
+    rows = {line.split(" | ")[1]: line.split(" | ") for line in out.splitlines() if line.startswith("| push")}
+    # after 2 epochs cebp has seeds 0-1 (0.3, 0.2) against her's three (0.1, 0.2, 0.4): (2 + 1.5) / 6
+    assert rows["cebp"][4].startswith("0.00 [") and rows["cebp"][5].startswith("0.58 [")
+    assert rows["her"][4:6] == ["(baseline)", "(baseline)"]
+    with pytest.raises(ValueError, match="epoch counts start at 1"):
+        main([str(tmp_path), "--table", "2", "--improvement-at", "0", "2"])

@@ -4,6 +4,7 @@
     python -m torchrl_cebp.plot runs --out fig.png --metric test_success --title "FetchPush"
     python -m torchrl_cebp.plot runs --table 5 10         # and prints a Markdown table after 5 and 10 epochs
     python -m torchrl_cebp.plot runs --table 5 10 --improvement-at 10   # and P(sampler > her) after 10 epochs
+    python -m torchrl_cebp.plot runs --table 10 15 --improvement-at 10 15   # P(sampler > her) after 10 and after 15
     python -m torchrl_cebp.plot runs --table 10 --mean-over 6 10   # and each seed's mean over epochs 6-10
 
 The statistics follow rliable's conventions (:mod:`torchrl_cebp.stats`): IQM, stratified-bootstrap
@@ -19,6 +20,7 @@ from __future__ import annotations
 import argparse
 import csv
 from collections import defaultdict
+from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
@@ -227,7 +229,7 @@ def summary_table(
     after_epochs: list[int],
     metric: str = "test_success",
     mean_over: tuple[int, int] | None = None,
-    improvement_at: int | None = None,
+    improvement_at: int | Sequence[int] = (),
     baseline: str = "her",
 ) -> str:
     """A Markdown table: per task and configuration, the IQM [95% bootstrap CI] of ``metric`` after each
@@ -235,9 +237,10 @@ def summary_table(
 
     ``mean_over=(first, last)`` adds a column of each seed's mean over epochs ``first`` to ``last``
     (counted from 1, both included; seeds that reached ``last``), steadier than one epoch's value
-    while success is still a few test episodes. ``improvement_at=n`` adds the probability that a
-    configuration's run beats a run of the panel's ``baseline`` configuration (the sampler folder of
-    that name, e.g. ``her``; ``-`` in panels without it) after ``n`` epochs, with its 95% interval.
+    while success is still a few test episodes. ``improvement_at=n`` (or several) adds, per ``n``, the
+    probability that a configuration's run beats a run of the panel's ``baseline`` configuration (the
+    sampler folder of that name, e.g. ``her``; ``-`` in panels without it) after ``n`` epochs, with its
+    95% interval, over the seeds of either that reached epoch ``n``.
 
     Examples:
         >>> import tempfile
@@ -258,7 +261,8 @@ def summary_table(
         raise ValueError(f"after_epochs={after_epochs}: epoch counts start at 1")
     if mean_over is not None and not 1 <= mean_over[0] <= mean_over[1]:
         raise ValueError(f"mean_over={tuple(mean_over)}: needs 1 <= first <= last")
-    if improvement_at is not None and improvement_at < 1:
+    improvement_at = [improvement_at] if isinstance(improvement_at, int) else list(improvement_at)
+    if any(n < 1 for n in improvement_at):
         raise ValueError(f"improvement_at={improvement_at}: epoch counts start at 1")
     root = Path(root)
     values = collect_sweep(root, metric)
@@ -268,8 +272,7 @@ def summary_table(
     header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs)]
     if mean_over is not None:
         header.append(f"mean over epochs {mean_over[0]}-{mean_over[1]}")
-    if improvement_at is not None:
-        header.append(f"P(> {baseline}) after {improvement_at} epoch{'s' * (improvement_at > 1)}")
+    header.extend(f"P(> {baseline}) after {n} epoch{'s' * (n > 1)}" for n in improvement_at)
     header.append("training hours")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
 
@@ -287,11 +290,12 @@ def summary_table(
                 first, last = mean_over
                 window = [curve[first - 1 : last].mean() for curve in curves if len(curve) >= last]
                 cells.append(iqm_cell(window, len(curves)))
-            if improvement_at is not None and len(baselines) == 1 and curves is baselines[0]:
-                cells.append("(baseline)")
-            elif improvement_at is not None:
-                reference = at_epoch(baselines[0], improvement_at) if len(baselines) == 1 else []
-                cells.append(improvement_cell(at_epoch(curves, improvement_at), reference))
+            for n in improvement_at:
+                if len(baselines) == 1 and curves is baselines[0]:
+                    cells.append("(baseline)")
+                else:
+                    reference = at_epoch(baselines[0], n) if len(baselines) == 1 else []
+                    cells.append(improvement_cell(at_epoch(curves, n), reference))
             hours = sum(curve.sum() for curve in epoch_seconds[panel][label]) / 3600
             cells.append(f"{hours:.1f}")
             lines.append("| " + " | ".join(cells) + " |")
@@ -314,8 +318,8 @@ def main(argv: list[str] | None = None) -> None:
         help="with --table: a column of each seed's mean over epochs FIRST to LAST",
     )
     parser.add_argument(
-        "--improvement-at", type=int, metavar="N",
-        help="with --table: a column of the probability of improvement over --baseline after N epochs",
+        "--improvement-at", nargs="+", type=int, default=[], metavar="N",
+        help="with --table: a column of the probability of improvement over --baseline after each N epochs",
     )
     parser.add_argument("--baseline", default="her", help="the configuration --improvement-at compares with")
     args = parser.parse_args(argv)
