@@ -38,6 +38,23 @@ def test_title_replaces_a_single_panels_folder_name_and_tops_several(tmp_path):
     assert fig.get_suptitle() == "all tasks"
 
 
+def test_one_task_folder_as_root_is_one_panel_of_its_samplers(tmp_path, capsys):
+    for seed, (her, cebp) in enumerate([(0.1, 0.3), (0.2, 0.3)]):
+        write_run(tmp_path / f"push-extended/her/paper/seed{seed}", [her])
+        write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", [cebp])
+    groups = collect_sweep(tmp_path / "push-extended", "test_success")
+    assert {panel: sorted(labels) for panel, labels in groups.items()} == {"push-extended": ["cebp/paper", "her/paper"]}
+    main([str(tmp_path / "push-extended"), "--table", "1", "--improvement-at", "1"])
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| push-extended (paper)")]
+    assert [row.split(" | ")[1] for row in rows] == ["cebp", "her"]
+    assert rows[0].split(" | ")[4] == "1.00 [1.00, 1.00]"  # every cebp seed above every her seed
+    write_run(tmp_path / "learning/collectors/her/seed0", [0.2])  # not the trainer's layout: one panel
+    write_run(tmp_path / "learning/cebp/seed0", [0.4])
+    assert {panel: sorted(labels) for panel, labels in collect_sweep(tmp_path / "learning", "test_success").items()} == {
+        "learning": ["cebp", "collectors/her"]
+    }
+
+
 def test_a_configuration_keeps_its_colour_and_fractions_share_one_scale(tmp_path):
     write_run(tmp_path / "pick_place-extended/her/paper/seed0", [0.0, 0.01])
     write_run(tmp_path / "push-extended/cebp/paper/seed0", [0.1, 0.8])

@@ -58,12 +58,21 @@ def read_curve(path: Path, metric: str) -> np.ndarray:
 
 
 def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarray]]]:
-    """``{panel: {curve label: [one curve per seed]}}`` for every ``progress.csv`` under ``root``."""
+    """``{panel: {curve label: [one curve per seed]}}`` for every ``progress.csv`` under ``root``.
+
+    In the trainer's layout ``<task>/<sampler>/<preset>/seed<k>`` the panel is the task folder, whether
+    ``root`` holds several tasks or is one task's folder; runs laid out otherwise share one panel named
+    after ``root``, labelled by their folders below it.
+    """
     groups: dict[str, dict[str, list[np.ndarray]]] = defaultdict(lambda: defaultdict(list))
     for path in sorted(root.rglob(CSV_NAME)):
-        configuration = path.parent.parent.relative_to(root).parts
-        panel = configuration[0] if len(configuration) > 1 else root.name
-        label = "/".join(configuration[1:] if len(configuration) > 1 else configuration) or path.parent.name
+        configuration_folder = path.parent.parent
+        task_folder = configuration_folder.parent.parent
+        if task_folder.is_relative_to(root):
+            panel, label_root = task_folder.name, task_folder
+        else:
+            panel, label_root = root.name, root
+        label = "/".join(configuration_folder.relative_to(label_root).parts) or path.parent.name
         curve = read_curve(path, metric)
         if curve.size:
             groups[panel][label].append(curve)
