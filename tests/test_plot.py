@@ -31,6 +31,10 @@ def test_title_replaces_a_single_panels_folder_name_and_tops_several(tmp_path):
     write_run(tmp_path / "learning/her/seed0", [0.0, 0.1])
     assert [ax.get_title() for ax in draw_sweep(tmp_path / "learning").axes] == ["learning"]
     assert [ax.get_title() for ax in draw_sweep(tmp_path / "learning", title="FetchPush").axes] == ["FetchPush"]
+    long_title = "Push on the released code's robot: joint control, extended goals, table-blind pads"
+    (ax,) = draw_sweep(tmp_path / "learning", title=long_title, log_y=True).axes
+    assert "\n" in ax.get_title() and ax.get_title().replace("\n", " ") == long_title  # wrapped, not cut off
+    assert ax.get_yscale() == "log"
     write_run(tmp_path / "sweep/push-extended/her/paper/seed0", [0.0, 0.1])
     write_run(tmp_path / "sweep/slide-extended/her/paper/seed0", [0.0, 0.1])
     fig = draw_sweep(tmp_path / "sweep", title="all tasks")
@@ -88,6 +92,19 @@ def test_errors_name_the_problem(tmp_path):
     write_run(tmp_path / "a/b/seed0", [0.1])
     with pytest.raises(KeyError, match="'success'.*test_success"):
         main([str(tmp_path), "--metric", "success"])
+
+
+def test_a_metric_some_samplers_do_not_log_draws_those_that_do(tmp_path):
+    write_run(tmp_path / "push-extended/her/paper/seed0", [0.1, 0.2])  # uniform HER: no IS weights
+    cebp = tmp_path / "push-extended/cebp/paper/seed0"
+    cebp.mkdir(parents=True)
+    (cebp / "progress.csv").write_text("epoch,test_success,is_weight_mean,epoch_s\n0,0.1,0.5,60\n1,0.3,0.25,60\n")
+    groups = collect_sweep(tmp_path, "is_weight_mean")
+    assert {label: [c.tolist() for c in curves] for label, curves in groups["push-extended"].items()} == {
+        "cebp/paper": [[0.5, 0.25]]
+    }
+    (ax,) = draw_sweep(tmp_path, metric="is_weight_mean").axes
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["cebp/paper (1 seed)"]
 
 
 def test_table_gives_iqm_and_bootstrap_interval_after_n_epochs(tmp_path, capsys):

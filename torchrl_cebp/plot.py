@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import textwrap
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -62,9 +63,11 @@ def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarra
 
     In the trainer's layout ``<task>/<sampler>/<preset>/seed<k>`` the panel is the task folder, whether
     ``root`` holds several tasks or is one task's folder; runs laid out otherwise share one panel named
-    after ``root``, labelled by their folders below it.
+    after ``root``, labelled by their folders below it. Runs that do not log ``metric`` (e.g. IS weights,
+    under a sampler without them) are left out; a ``metric`` no run logs raises ``KeyError``.
     """
     groups: dict[str, dict[str, list[np.ndarray]]] = defaultdict(lambda: defaultdict(list))
+    missing: list[KeyError] = []
     for path in sorted(root.rglob(CSV_NAME)):
         configuration_folder = path.parent.parent
         task_folder = configuration_folder.parent.parent
@@ -73,9 +76,15 @@ def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarra
         else:
             panel, label_root = root.name, root
         label = "/".join(configuration_folder.relative_to(label_root).parts) or path.parent.name
-        curve = read_curve(path, metric)
+        try:
+            curve = read_curve(path, metric)
+        except KeyError as error:
+            missing.append(error)
+            continue
         if curve.size:
             groups[panel][label].append(curve)
+    if missing and not groups:
+        raise missing[0]
     return groups
 
 
@@ -151,7 +160,9 @@ def seed_count(n: int) -> str:
     return f"{n} seed{'s' * (n > 1)}"
 
 
-def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None = None) -> plt.Figure:
+def draw_sweep(
+    root: str | Path, metric: str = "test_success", title: str | None = None, log_y: bool = False
+) -> plt.Figure:
     """One panel per task, one IQM line and 95% bootstrap band per configuration.
 
     The legend names how many seeds each stretch of a curve averages, so a tail that only some
@@ -161,6 +172,8 @@ def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None
     rate, a fraction) is drawn on one shared scale, so that a task still near zero looks it.
     ``title`` names the figure; with a single panel it replaces the panel's own title (its folder name),
     which is what a sweep root without a ``<task>-<goal_space>`` level (e.g. ``runs/learning``) needs.
+    ``log_y`` draws the metric on a log scale, for one that spans decades (IS weights, the effective
+    fraction of the buffer drawn from).
     """
     root = Path(root)
     groups = collect_sweep(root, metric)
@@ -180,7 +193,9 @@ def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None
             epochs = np.arange(1, len(mean) + 1)
             ax.plot(epochs, mean, color=colour[label], label=f"{short[label]} ({seed_coverage(seeds)})")
             ax.fill_between(epochs, low, high, color=colour[label], alpha=0.2)
-        ax.set_title(title if title is not None and len(groups) == 1 else panel_title)
+        ax.set_title(textwrap.fill(title if title is not None and len(groups) == 1 else panel_title, 50))
+        if log_y:
+            ax.set_yscale("log")
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epochs trained")
         ax.set_ylabel(f"{metric.replace('_', ' ')} (IQM, 95% CI)")
@@ -194,10 +209,14 @@ def draw_sweep(root: str | Path, metric: str = "test_success", title: str | None
 
 
 def plot_sweep(
-    root: str | Path, out: str | Path | None = None, metric: str = "test_success", title: str | None = None
+    root: str | Path,
+    out: str | Path | None = None,
+    metric: str = "test_success",
+    title: str | None = None,
+    log_y: bool = False,
 ) -> Path:
     """Draws the sweep (:func:`draw_sweep`) to a PNG, by default ``<root>/<metric>.png``; returns its path."""
-    fig = draw_sweep(root, metric, title)
+    fig = draw_sweep(root, metric, title, log_y)
     out = Path(out) if out is not None else Path(root) / f"{metric}.png"
     fig.savefig(out, dpi=120)
     plt.close(fig)
@@ -319,6 +338,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", help="PNG path (default: <root>/<metric>.png)")
     parser.add_argument("--metric", default="test_success", help="CSV column to plot")
     parser.add_argument("--title", help="figure title (default: each panel is titled with its task folder)")
+    parser.add_argument("--log-y", action="store_true", help="a log scale for a metric that spans decades")
     parser.add_argument(
         "--table", nargs="+", type=int, metavar="N", help="also print a Markdown table of the metric after N epochs"
     )
@@ -335,7 +355,7 @@ def main(argv: list[str] | None = None) -> None:
     for option, value in (("--mean-over", args.mean_over), ("--improvement-at", args.improvement_at)):
         if value and not args.table:
             parser.error(f"{option} adds a column to --table: give --table too")
-    print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title)}")
+    print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title, args.log_y)}")
     if args.table:
         print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline))
 

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Redraws the comparison's figures in docs/results/comparison/ from the committed CSVs and prints the
+# verdict table of docs/results.md (IQM [95% CI] and P(> her), rliable's conventions).
+# Usage: bash scripts/redraw_results.sh [-h]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,4p' "$0" | cut -c3-; exit 0; fi
+python=${PYTHON:-.venv/bin/python}
+results=docs/results/comparison
+plot() { "$python" -m torchrl_cebp.plot "$@" 2> >(grep -v AdroitHand >&2); }
+plot "$results" --out "$results/test_success.png" --table 5 10 12 15 --improvement-at 10 15
+plot "$results/push-extended-joint-tableblind" --out "$results/push_released_robot.png" \
+  --title "Push on robot B, the released code's: joint control, extended goals, table-blind pads"
+plot "$results" --metric priority_ess_fraction --log-y --out "$results/priority_ess_fraction.png"
+plot "$results" --metric is_weight_mean --log-y --out "$results/is_weight_mean.png"
