@@ -8,7 +8,7 @@ if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,4p' "$0" | cut
 python=${PYTHON:-.venv/bin/python}
 results=docs/results/comparison
 plot() { "$python" -m torchrl_cebp.plot "$@" 2> >(grep -v AdroitHand >&2); }
-plot "$results" --out "$results/test_success.png" --table 5 10 12 15 --improvement-at 10 15
+plot "$results" --out "$results/test_success.png" --table 5 10 12 15 --improvement-at 10 12 15
 plot "$results/push-extended-joint-tableblind" --out "$results/push_released_robot.png" \
   --title "Push on robot B, the released code's: joint control, extended goals, table-blind pads"
 plot "$results" --metric priority_ess_fraction --log-y --out "$results/priority_ess_fraction.png"
