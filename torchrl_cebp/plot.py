@@ -67,7 +67,7 @@ def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarra
     under a sampler without them) are left out; a ``metric`` no run logs raises ``KeyError``.
     """
     groups: dict[str, dict[str, list[np.ndarray]]] = defaultdict(lambda: defaultdict(list))
-    missing: list[KeyError] = []
+    first_missing: KeyError | None = None
     for path in sorted(root.rglob(CSV_NAME)):
         configuration_folder = path.parent.parent
         task_folder = configuration_folder.parent.parent
@@ -79,12 +79,12 @@ def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarra
         try:
             curve = read_curve(path, metric)
         except KeyError as error:
-            missing.append(error)
+            first_missing = first_missing or error
             continue
         if curve.size:
             groups[panel][label].append(curve)
-    if missing and not groups:
-        raise missing[0]
+    if first_missing is not None and not groups:
+        raise first_missing
     return groups
 
 
@@ -318,10 +318,10 @@ def summary_table(
                 first, last = mean_over
                 window = [curve[first - 1 : last].mean() for curve in curves if len(curve) >= last]
                 cells.append(iqm_cell(window, len(curves)))
-            for n in improvement_at:
-                if len(baselines) == 1 and curves is baselines[0]:
-                    cells.append("(baseline)")
-                else:
+            if len(baselines) == 1 and curves is baselines[0]:
+                cells.extend("(baseline)" for _ in improvement_at)
+            else:
+                for n in improvement_at:
                     reference = at_epoch(baselines[0], n) if len(baselines) == 1 else []
                     cells.append(improvement_cell(at_epoch(curves, n), reference))
             hours = sum(curve.sum() for curve in epoch_seconds[panel][label]) / 3600
