@@ -42,7 +42,9 @@ def test_the_storage_state_keeps_the_stored_tensordict_under_its_key():
     storage.set(torch.arange(2), make_episodes(2))
     saved = TensorDict().load_state_dict(storage.state_dict()[_upstream.STORAGE_STATE_KEY], strict=False)
     # Rows 2-9 were never written: torch.empty memory, which may hold NaN, so NaN must equal NaN here.
-    torch.testing.assert_close(saved["action"], _upstream.stored_tensordict(storage)["action"], rtol=0, atol=0, equal_nan=True)
+    torch.testing.assert_close(
+        saved["action"], _upstream.stored_tensordict(storage)["action"], rtol=0, atol=0, equal_nan=True
+    )
 
 
 def test_the_stored_tensordict_is_what_the_storage_reads_and_writes():
