@@ -1,4 +1,7 @@
 """HER relabelling: goals from later next-states of the same episode, rewards recomputed, before the transforms."""
+import copy
+import pickle
+
 import pytest
 import torch
 from tensordict import TensorDict
@@ -144,3 +147,20 @@ def test_a_buffer_given_her_only_as_sample_unit_fails_loudly():
     rb.sample()
     with pytest.raises(RuntimeError, match="collate_fn=her.collate"):
         rb.sample()
+
+
+def pickled(rb):
+    return pickle.loads(pickle.dumps(rb))
+
+
+@pytest.mark.parametrize("copy_buffer", [pickled, copy.deepcopy], ids=["pickle", "deepcopy"])
+@pytest.mark.parametrize("make_sampler", [UniformEpisodeSampler, CEBPSampler, lambda: PERSampler(10 * T)])
+def test_a_buffer_with_her_copies_and_the_copy_draws_what_the_original_draws(copy_buffer, make_sampler):
+    rb = make_replay_buffer(make_sampler(), HindsightRelabel(sparse_reward, future_p=0.5), capacity=10 * T,
+                            batch_size=256, generator=torch.Generator().manual_seed(0))
+    rb.extend(labelled_episodes(4))
+    rb.sample()  # a draw has run: its expand/collate hand-over is over
+    copied = copy_buffer(rb)
+    for _ in range(2):
+        expected, got = rb.sample(), copied.sample()
+        assert (expected == got).all()

@@ -225,6 +225,17 @@ class HindsightRelabel(SampleUnit):
             data.set(key, value)
         return data
 
+    # A thread-local cannot be pickled; a pending draw belongs to the thread between a buffer's expand and its
+    # collate, so a copy (deepcopy, pickle, a collector's worker) starts with none.
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        del state["_pending"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._pending = threading.local()
+
     def __repr__(self) -> str:
         return f"HindsightRelabel(strategy={self.strategy!r}, future_p={self.future_p})"
 
