@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 import torch
+from torchrl.data import RoundRobinWriter
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
 from tests.replay.test_her import decode, labelled_episodes
@@ -138,3 +139,32 @@ def test_per_state_dict_loads_with_weights_only(tmp_path):
     assert restored.beta == rb.sampler.beta
     every = torch.arange(10 * T)
     assert torch.equal(torch.as_tensor(restored._sum_tree[every]), torch.as_tensor(rb.sampler._sum_tree[every]))
+
+
+def test_prefetched_batches_are_relabelled_in_their_own_threads():
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward, future_p=1.0), capacity=10 * T,
+                            batch_size=512, prefetch=3)
+    rb.extend(labelled_episodes(4))
+    for _ in range(6):  # the first draw fills the queue; the next ones come from the prefetching threads
+        batch = rb.sample()
+        episode, state = decode(batch["desired_goal"])
+        assert torch.equal(episode, decode(batch["achieved_goal"])[0])
+        assert (state > batch["index"][:, 1]).all()
+
+
+def test_writer_and_sharing_reach_the_buffer():
+    writer = RoundRobinWriter()
+    rb = make_replay_buffer(None, HindsightRelabel(sparse_reward), capacity=10 * T, writer=writer, shared=True)
+    rb.extend(make_episodes(3))
+    assert rb.writer is writer and rb.write_count == 3
+    assert rb.shared
+
+
+def test_pin_memory_pins_the_batches():
+    rb = make_replay_buffer(None, HindsightRelabel(sparse_reward), capacity=10 * T, batch_size=8, pin_memory=True)
+    rb.extend(make_episodes(2))
+    if not torch.cuda.is_available():
+        with pytest.raises(RuntimeError):  # pinning needs a CUDA driver: the option reached the buffer
+            rb.sample()
+        return
+    assert rb.sample()["observation"].is_pinned()

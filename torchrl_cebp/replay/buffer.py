@@ -6,6 +6,7 @@ from typing import Literal
 import torch
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.data.replay_buffers.samplers import Sampler
+from torchrl.data.replay_buffers.writers import Writer
 from torchrl.envs import Transform
 
 from torchrl_cebp.replay.her import HindsightRelabel
@@ -47,6 +48,10 @@ def make_replay_buffer(
     device: torch.device | str = "cpu",
     transform: Transform | None = None,
     generator: torch.Generator | None = None,
+    writer: Writer | None = None,
+    prefetch: int | None = None,
+    pin_memory: bool = False,
+    shared: bool = False,
 ) -> TensorDictReplayBuffer:
     """A stock :class:`~torchrl.data.TensorDictReplayBuffer` over an episode storage, a sampler (uniform HER by default) and HER.
 
@@ -57,6 +62,8 @@ def make_replay_buffer(
     ``"priority_weight"``. With a :class:`~torchrl_cebp.samplers.PERSampler`,
     ``rb.update_tensordict_priority(batch)`` feeds ``batch["td_error"]`` back.
     ``generator`` drives every random draw of a sample: the sampler's and HER's.
+    ``writer``, ``prefetch``, ``pin_memory`` and ``shared`` mean what they mean to
+    :class:`~torchrl.data.ReplayBuffer`; HER keeps each prefetching thread's draw apart.
 
     Examples:
         >>> import torch
@@ -90,4 +97,8 @@ def make_replay_buffer(
         dim_extend=0,
         priority_key="td_error",
         generator=generator,
+        writer=writer,
+        prefetch=prefetch,
+        pin_memory=pin_memory,
+        shared=shared,
     )
