@@ -46,6 +46,7 @@ FRANKA_ASSETS = os.path.join(os.path.dirname(gymnasium_robotics.__file__), "envs
 
 ARM_JOINTS: tuple[str, ...] = tuple(f"robot:panda0_joint{i}" for i in range(1, 8))
 FINGER_JOINTS: tuple[str, str] = ("robot:panda0_finger_joint1", "robot:panda0_finger_joint2")
+FINGER_ACTUATORS: tuple[str, str] = ("r_gripper_finger_joint", "l_gripper_finger_joint")
 HAND_BODY = "panda0_link7"
 # The pose the mocap weld settles into with the hand pointing down and the fingers closing along y
 # (found by letting the weld pull the arm there from several starts; all converged to this one).
@@ -131,6 +132,12 @@ def franka_spec(layout: FrankaLayout = FrankaLayout()) -> mujoco.MjSpec:
     for joint in spec.joints:
         if joint.name in ARM_JOINTS:
             joint.damping = 10.0
+    # gymnasium-robotics sets each finger's position target to its position plus the action, and MuJoCo clamped
+    # the target to the joint range: on the 5 cm cube the fingers sit 2.5 cm from the clamped target, so they
+    # squeezed with kp x 2.5 cm = 12.7 N and fast moves shook a held cube loose. Unclamped, the squeeze is the
+    # actuators' force limit, 70 N: the Franka Hand's continuous grasp force.
+    for name in FINGER_ACTUATORS:
+        spec.actuator(name).ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
     for body in spec.bodies:
         if body.name.startswith("panda0_link") and body.name != "panda0_link0" or "finger" in body.name:
             body.gravcomp = 1.0  # the real Panda compensates gravity; without it the hand sags below the mocap
