@@ -8,7 +8,9 @@ default the peers get one thread (ANCHORS.md's setting) and two, and our trainer
 one while the env process collects, both once it is done.
 
   * ours: ``torchrl_cebp.training.train`` (touch-sensing FetchPush, standard goals), overlap off and on,
-    and overlapped with ``precision=bf16`` (bfloat16 matrix products in the updates);
+    and overlapped with ``precision=bf16`` (bfloat16 matrix products in the updates); with ``--workers`` > 1
+    it replays per worker (the default), ``ours_merged`` from one merged buffer (``replay.per_worker=false``),
+    and the table adds the ratio of the two;
   * plain: a single-threaded PyTorch + numpy DDPG+HER loop written here on gymnasium's ``FetchPush-v4``
     (the floor a hand-written script reaches);
   * sb3: Stable-Baselines3 ``DDPG`` + ``HerReplayBuffer`` on ``FetchPush-v4`` (it moves its target
@@ -16,6 +18,11 @@ one while the env process collects, both once it is done.
 
     .venv/bin/python benchmarks/training.py                       # a per-worker epoch (50 cycles)
     .venv/bin/python benchmarks/training.py --workers 8 --cycles 10   # paper scale, a fifth of an epoch
+    .venv/bin/python benchmarks/training.py --workers 8 --cycles 10 --sampler cebp_initial \
+        --methods ours_merged:1 ours:1 --repeats 3        # per-worker against merged replay, interleaved
+
+With ``--repeats N`` every method runs N times, the methods interleaved, and each reports its median
+(on shared cores this keeps a slow stretch from landing on one method only).
 """
 
 from __future__ import annotations
@@ -49,7 +56,8 @@ class Timing:
     update_s: float | None = None
 
 
-def run_ours(cycles: int, workers: int, overlap: bool, threads: int, precision: str = "fp32") -> Timing:
+def run_ours(cycles: int, workers: int, overlap: bool, threads: int, precision: str = "fp32", sampler: str = "her",
+             per_worker: bool = True) -> Timing:
     from pathlib import Path
 
     from torchrl_cebp.training import train
@@ -59,6 +67,7 @@ def run_ours(cycles: int, workers: int, overlap: bool, threads: int, precision: 
         cfg = compose("config", overrides=[
             "env=push", "env.goal_space=standard", "epochs=1", f"cycles_per_epoch={cycles}", f"workers={workers}",
             f"overlap_collection={str(overlap).lower()}", f"threads={threads}", f"precision={precision}", "device=cpu",
+            f"sampler={sampler}", f"replay.per_worker={str(per_worker).lower()}",
         ])
     with tempfile.TemporaryDirectory() as run_dir:
         with open(train(cfg, run_dir), newline="") as f:
@@ -216,32 +225,41 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument(
         "--methods", nargs="+", default=["ours:1", "ours_overlap:2", "ours_overlap_bf16:2", "plain:1", "sb3:1", "sb3:2"],
-        help="NAME[:THREADS] with NAME in ours, ours_overlap, ours_overlap_bf16, plain, sb3; THREADS (torch threads) defaults to --threads",
+        help="NAME[:THREADS] with NAME in ours, ours_merged, ours_overlap, ours_overlap_bf16, plain, sb3; THREADS (torch threads) defaults to --threads",
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads of a method given without :THREADS")
+    parser.add_argument("--sampler", default="her", help="our trainer's sampler config (conf/sampler/), e.g. cebp_initial")
+    parser.add_argument("--repeats", type=int, default=1, help="runs of every method, interleaved; each reports its median")
     args = parser.parse_args()
     gym.register_envs(gymnasium_robotics)
     runners = {
-        "ours": lambda threads: run_ours(args.cycles, args.workers, overlap=False, threads=threads),
-        "ours_overlap": lambda threads: run_ours(args.cycles, args.workers, overlap=True, threads=threads),
+        "ours": lambda threads: run_ours(args.cycles, args.workers, overlap=False, threads=threads, sampler=args.sampler),
+        "ours_merged": lambda threads: run_ours(
+            args.cycles, args.workers, overlap=False, threads=threads, sampler=args.sampler, per_worker=False
+        ),
+        "ours_overlap": lambda threads: run_ours(
+            args.cycles, args.workers, overlap=True, threads=threads, sampler=args.sampler
+        ),
         "ours_overlap_bf16": lambda threads: run_ours(
-            args.cycles, args.workers, overlap=True, threads=threads, precision="bf16"
+            args.cycles, args.workers, overlap=True, threads=threads, precision="bf16", sampler=args.sampler
         ),
         "plain": lambda threads: run_plain(args.cycles, args.workers),
         "sb3": lambda threads: run_sb3(args.cycles, args.workers),
     }
     if any(method.partition(":")[0] == "sb3" for method in args.methods):
         require_stable_baselines3()
-    results = {}
-    for method in args.methods:
-        name, _, threads = method.partition(":")
-        if name not in runners:
-            parser.error(f"unknown method {name!r}: choose from {', '.join(runners)}")
-        n_threads = int(threads or args.threads)
-        label = f"{name}:{n_threads}"
-        torch.set_num_threads(n_threads)  # the peers run in this process; ours sets its own
-        results[label] = runners[name](n_threads)
-        print(f"{label}: {results[label]}", flush=True)
+    runs: dict[str, list[Timing]] = {}
+    for repeat in range(args.repeats):
+        for method in args.methods:
+            name, _, threads = method.partition(":")
+            if name not in runners:
+                parser.error(f"unknown method {name!r}: choose from {', '.join(runners)}")
+            n_threads = int(threads or args.threads)
+            label = f"{name}:{n_threads}"
+            torch.set_num_threads(n_threads)  # the peers run in this process; ours sets its own
+            runs.setdefault(label, []).append(runners[name](n_threads))
+            print(f"[{repeat + 1}/{args.repeats}] {label}: {runs[label][-1]}", flush=True)
+    results = {label: _median(timings) for label, timings in runs.items()}
 
     def fmt(x: float | None) -> str:
         return "-" if x is None else f"{x:8.1f}"
@@ -255,6 +273,18 @@ def main() -> None:
     for label, t in results.items():
         ratios = " ".join(f"{results[p].epoch_s / t.epoch_s:9.2f}x" for p in peers)
         print(f"{label:{width}s} {fmt(t.epoch_s)} {fmt(t.sim_s)} {fmt(t.update_s)} {ratios}")
+    for label in results:
+        name, _, threads = label.partition(":")
+        merged = results.get(f"ours_merged:{threads}")
+        if name == "ours" and merged is not None:
+            print(f"\nper-worker / merged replay ({args.sampler}, {args.workers} workers, {threads} thread(s), "
+                  f"median of {args.repeats}): epoch {results[label].epoch_s / merged.epoch_s:.3f}x, "
+                  f"updates {results[label].update_s / merged.update_s:.3f}x")
+
+
+def _median(timings: list[Timing]) -> Timing:
+    """The run of median epoch time (its sim and update times with it)."""
+    return sorted(timings, key=lambda t: t.epoch_s)[(len(timings) - 1) // 2]
 
 
 if __name__ == "__main__":

@@ -10,12 +10,16 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
+from omegaconf import OmegaConf
 from tensordict import TensorDict
 
 from torchrl_cebp.replay import HindsightRelabel
 from torchrl_cebp.training import ConfigError, load_checkpoint, load_policy, train, validate_config
-from torchrl_cebp.training.config import env_label, warn_if_bf16_is_emulated
-from torchrl_cebp.training.builders import TaskDims, derive_seed, make_agent, make_env, make_replay, make_training_collector
+from torchrl_cebp.samplers import PerWorkerSampler
+from torchrl_cebp.training.config import check_same_run, env_label, warn_if_bf16_is_emulated
+from torchrl_cebp.training.builders import (
+    TaskDims, derive_seed, make_agent, make_env, make_replay, make_sampler, make_training_collector,
+)
 from torchrl_cebp.training.checkpoint import CHECKPOINT_NAME, POLICY_NAME
 from torchrl_cebp.training.evaluation import evaluate_success_rate
 from torchrl_cebp.training.trainer import TEST_STREAM, RelabelledTransitions
@@ -89,9 +93,10 @@ def test_resume_repeats_the_uninterrupted_run(tmp_path, overlap, threads):
     assert load_checkpoint(tmp_path / "split")["epoch"] == 1
 
 
-@pytest.mark.parametrize("overlap", ["false", "true"])
-def test_kill_9_mid_epoch_then_resume_repeats_the_uninterrupted_run(tmp_path, overlap):
-    run = ("sampler=cebp", f"overlap_collection={overlap}", "epochs=3", "cycles_per_epoch=6")
+@pytest.mark.parametrize(("overlap", "sampler", "workers"), [("false", "cebp", 1), ("true", "cebp", 1), ("false", "per", 2)])
+def test_kill_9_mid_epoch_then_resume_repeats_the_uninterrupted_run(tmp_path, overlap, sampler, workers):
+    # workers=2: per-worker replay, every worker's PER trees and the annealed beta must come back
+    run = (f"sampler={sampler}", f"overlap_collection={overlap}", f"workers={workers}", "epochs=3", "cycles_per_epoch=6")
     straight = rows(train(config(*run), tmp_path / "straight"))
     killed = tmp_path / "killed"
     process = subprocess.Popen([sys.executable, "train.py", *TINY, *run, f"hydra.run.dir={killed}"], cwd=REPO,
@@ -105,7 +110,7 @@ def test_kill_9_mid_epoch_then_resume_repeats_the_uninterrupted_run(tmp_path, ov
     assert load_checkpoint(killed)["epoch"] < 2, "the run ended before it could be killed mid-run"
     resumed = _cli(*TINY, *run, "resume=true", f"hydra.run.dir={killed}")
     assert resumed.returncode == 0, resumed.stderr
-    for key in LEARNING_COLUMNS:
+    for key in set(LEARNING_COLUMNS) & set(straight[0]):
         assert [r[key] for r in rows(killed / "progress.csv")] == [r[key] for r in straight]
 
 
@@ -346,3 +351,23 @@ def test_code_version_is_the_commit_the_process_loaded(monkeypatch):
         assert [metrics.code_version(), metrics.code_version()] == ["aaaaaaaaaaaa", "aaaaaaaaaaaa"]
     finally:
         metrics.code_version.cache_clear()
+
+
+@pytest.mark.parametrize(("workers", "per_worker", "layout"), [(2, "true", "per_worker"), (2, "false", "merged"),
+                                                                (1, "true", "single")])
+def test_every_row_names_the_replay_layout_that_ran(tmp_path, workers, per_worker, layout):
+    cfg = config("sampler=cebp_initial", "epochs=1", f"workers={workers}", f"replay.per_worker={per_worker}")
+    log = rows(train(cfg, tmp_path))
+    assert log[0]["replay"] == layout
+    sampler = make_sampler(cfg)
+    assert isinstance(sampler, PerWorkerSampler) == (layout == "per_worker")
+    if layout == "per_worker":
+        assert [shard.n_episodes for shard in sampler.samplers] == [0, 0]
+
+
+def test_a_checkpoint_from_before_per_worker_replay_resumes_only_as_merged():
+    saved = {key: value for key, value in OmegaConf.to_container(config("workers=2"), resolve=True).items()}
+    del saved["replay"]["per_worker"]
+    check_same_run(saved, config("workers=2", "replay.per_worker=false"))
+    with pytest.raises(ConfigError, match="per_worker': False.*per_worker': True"):
+        check_same_run(saved, config("workers=2"))

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from omegaconf import DictConfig
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
 from tensordict.nn import TensorDictSequential
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.data.replay_buffers.samplers import Sampler
@@ -19,8 +20,11 @@ from torchrl.envs import EnvBase
 from torchrl.objectives import SoftUpdate, group_optimizers
 
 from torchrl_cebp.agents import HERDDPGLoss, ObsGoalNormalizer, make_critic
-from torchrl_cebp.envs import make_env_from_config
+from torchrl_cebp.envs import FRANKA_TASK, make_env_from_config
+from torchrl_cebp.envs.franka import FrankaLayout
+from torchrl_cebp.envs.goal_spaces import get_goal_space
 from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+from torchrl_cebp.samplers import PerWorkerSampler
 from torchrl_cebp.training.collection import EpisodeBatches, make_collector, make_policy
 
 
@@ -107,6 +111,51 @@ def make_optimizer(cfg: DictConfig, loss: HERDDPGLoss) -> torch.optim.Optimizer:
     return group_optimizers(actor, critic)
 
 
+def replay_layout(cfg: DictConfig) -> str:
+    """How the emulated workers replay: ``"per_worker"`` (a buffer, sampler and draw each, as baselines' MPI
+    workers), ``"merged"`` (one buffer drawing ``workers x batch_size``) or ``"single"`` (one worker)."""
+    if cfg.workers == 1:
+        return "single"
+    return "per_worker" if cfg.replay.per_worker else "merged"
+
+
+def worker_share(capacity: int, episode_steps: int, workers: int, episodes_per_worker: int) -> int:
+    """The most transitions one worker's rows hold of a storage of ``capacity`` (see :class:`~torchrl_cebp.samplers.WorkerRows`).
+
+    Example:
+        >>> worker_share(1_000_000, 50, 8, 2), worker_share(1_000_000, 70, 8, 2)
+        (125000, 125020)
+    """
+    rows = capacity // episode_steps
+    return -(-rows // (workers * episodes_per_worker)) * episodes_per_worker * episode_steps
+
+
+def make_sampler(cfg: DictConfig) -> Sampler:
+    """The replay sampler of ``cfg.sampler``; with per-worker replay, one per worker inside a :class:`PerWorkerSampler`.
+
+    Worker ``w`` gets the episodes of its ``rollouts_per_cycle`` envs. A PER shard holds its worker's rows of
+    ``replay.capacity``; a shard with a ``seed`` (MEP's density model) gets one of its own.
+
+    Example:
+        >>> from omegaconf import OmegaConf
+        >>> cfg = OmegaConf.create({"seed": 0, "workers": 4, "rollouts_per_cycle": 2, "replay": {"per_worker": True},
+        ...                         "sampler": {"_target_": "torchrl_cebp.samplers.UniformEpisodeSampler"}})
+        >>> make_sampler(cfg)
+        PerWorkerSampler(workers=4, episodes_per_worker=2, sampler=UniformEpisodeSampler(n_episodes=0))
+    """
+    if replay_layout(cfg) != "per_worker":
+        return instantiate(cfg.sampler)
+    shards = []
+    for worker in range(cfg.workers):
+        own = {}
+        if "capacity" in cfg.sampler:
+            own["capacity"] = worker_share(cfg.sampler.capacity, episode_steps(cfg), cfg.workers, cfg.rollouts_per_cycle)
+        if "seed" in cfg.sampler:
+            own["seed"] = derive_seed(cfg.sampler.seed, worker)
+        shards.append(instantiate(cfg.sampler, **own))
+    return PerWorkerSampler(*shards, episodes_per_worker=cfg.rollouts_per_cycle)
+
+
 def make_replay(cfg: DictConfig, sampler: Sampler, env: EnvBase) -> tuple[TensorDictReplayBuffer, HindsightRelabel]:
     """The episode replay of ``cfg.replay`` with ``sampler`` and HER relabelling against ``env``'s reward.
 
@@ -117,6 +166,17 @@ def make_replay(cfg: DictConfig, sampler: Sampler, env: EnvBase) -> tuple[Tensor
     replay = make_replay_buffer(sampler, her, capacity=cfg.replay.capacity, batch_size=cfg.batch_size * cfg.workers,
                                 generator=torch.Generator().manual_seed(derive_seed(cfg.seed, 3)))
     return replay, her
+
+
+def episode_steps(cfg: DictConfig) -> int | None:
+    """Steps per episode of the configured task, without building it (``None`` if the env config is invalid)."""
+    task, goal_space = OmegaConf.select(cfg, "env.task"), OmegaConf.select(cfg, "env.goal_space")
+    if task == FRANKA_TASK:
+        return FrankaLayout().max_episode_steps
+    try:
+        return get_goal_space(task, goal_space).max_episode_steps
+    except ValueError:
+        return None
 
 
 def episodes_per_cycle(cfg: DictConfig) -> int:

@@ -11,10 +11,8 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from torchrl_cebp.envs import ALL_TASKS, CONTROLS, FRANKA_TASK, GOAL_SPACES, RobotOptions
-from torchrl_cebp.envs.franka import FrankaLayout
-from torchrl_cebp.envs.goal_spaces import get_goal_space
 from torchrl_cebp.replay.her import STRATEGIES
-from torchrl_cebp.training.builders import episodes_per_cycle
+from torchrl_cebp.training.builders import episode_steps, episodes_per_cycle
 from torchrl_cebp.training.metrics import LOGGERS
 
 DEVICES = ("auto", "cpu", "cuda")
@@ -107,6 +105,7 @@ def validate_config(cfg: DictConfig) -> None:
         positive_int(key)
     check("resume", lambda v: isinstance(v, bool), "true or false")
     check("overlap_collection", lambda v: isinstance(v, bool), "true or false")
+    check("replay.per_worker", lambda v: isinstance(v, bool), "true or false")
     check("collector_processes", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
     real_in("replay.future_p", 0.0, 1.0)
     real_in("agent.tau", 0.0, 1.0, open_low=True)
@@ -155,17 +154,6 @@ def _collection_errors(cfg: DictConfig) -> list[str]:
     return errors
 
 
-def episode_steps(cfg: DictConfig) -> int | None:
-    """Steps per episode of the configured task, without building it (``None`` if the env config is invalid)."""
-    task, goal_space = OmegaConf.select(cfg, "env.task"), OmegaConf.select(cfg, "env.goal_space")
-    if task == FRANKA_TASK:
-        return FrankaLayout().max_episode_steps
-    try:
-        return get_goal_space(task, goal_space).max_episode_steps
-    except ValueError:
-        return None
-
-
 def resolve_device(name: str) -> torch.device:
     """``"auto"`` is CUDA when available, else the CPU."""
     if name == "auto":
@@ -192,6 +180,25 @@ RUN_DEFINING_KEYS = (
 )
 
 
+# What a checkpoint made before a run-defining key existed ran with: checkpoints before per-worker replay
+# merged the workers' episodes into one buffer.
+LEGACY_DEFAULTS: dict[tuple[str, str], object] = {("replay", "per_worker"): False}
+
+
+def with_legacy_defaults(saved: dict) -> dict:
+    """A checkpoint's config with the keys added since it was made, set to what that run did.
+
+    Example:
+        >>> with_legacy_defaults({"replay": {"capacity": 10}})["replay"]
+        {'capacity': 10, 'per_worker': False}
+    """
+    saved = {**saved}
+    for (group, key), value in LEGACY_DEFAULTS.items():
+        if isinstance(saved.get(group), dict) and key not in saved[group]:
+            saved[group] = {**saved[group], key: value}
+    return saved
+
+
 def check_same_run(saved: dict, cfg: DictConfig) -> None:
     """Raises :class:`ConfigError` when ``cfg`` differs from a checkpoint's config in a run-defining key.
 
@@ -205,6 +212,7 @@ def check_same_run(saved: dict, cfg: DictConfig) -> None:
         cannot resume: the checkpoint was made with seed=0, this config has seed=1
     """
     current = OmegaConf.to_container(cfg, resolve=True)
+    saved = with_legacy_defaults(saved)
     differences = [
         f"{key}={saved.get(key)!r}, this config has {key}={current.get(key)!r}"
         for key in RUN_DEFINING_KEYS

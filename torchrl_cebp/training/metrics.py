@@ -120,14 +120,15 @@ class EpochLog:
         'epoch,test_success,code_commit'
     """
 
-    def __init__(self, run_dir: str | Path, start_epoch: int, logger: str) -> None:
+    def __init__(self, run_dir: str | Path, start_epoch: int, logger: str, labels: dict[str, str] | None = None) -> None:
         self.csv_path = Path(run_dir) / CSV_NAME
         self._csv = EpochCsv(self.csv_path, start_epoch)
         self._logger = make_logger(logger, run_dir)
-        self._commit = code_version()
+        # Text columns that say what ran (e.g. the replay layout): in every CSV row, never logged as scalars.
+        self._labels = {**(labels or {}), "code_commit": code_version()}
 
     def write(self, epoch: int, row: dict[str, float]) -> None:
-        self._csv.write({"epoch": epoch, **row, "code_commit": self._commit})
+        self._csv.write({"epoch": epoch, **row, **self._labels})
         if self._logger is not None:
             for key, value in row.items():
                 self._logger.log_scalar(key, value, step=epoch)

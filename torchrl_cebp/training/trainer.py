@@ -15,15 +15,15 @@ from collections import defaultdict
 from pathlib import Path
 
 import torch
-from hydra.utils import instantiate
 from omegaconf import DictConfig
 from tensordict import TensorDict, TensorDictBase
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.data.replay_buffers.samplers import Sampler
+from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from tqdm import tqdm
 
 from torchrl_cebp.replay import HindsightRelabel
-from torchrl_cebp.samplers import EpisodePrioritySampler, PERSampler
+from torchrl_cebp.samplers import EpisodePrioritySampler, PERSampler, PerWorkerSampler
 from torchrl_cebp.training.builders import (
     Agent,
     TaskDims,
@@ -33,7 +33,9 @@ from torchrl_cebp.training.builders import (
     make_env,
     make_optimizer,
     make_replay,
+    make_sampler,
     make_training_collector,
+    replay_layout,
 )
 from torchrl_cebp.training.checkpoint import (
     has_checkpoint,
@@ -80,13 +82,26 @@ class RelabelledTransitions:
                           [goal.shape[0]])
 
 
+def _shard(sampler: Sampler) -> Sampler:
+    """The sampler of one worker: the sampler itself unless it is a :class:`PerWorkerSampler`."""
+    return sampler.samplers[0] if isinstance(sampler, PerWorkerSampler) else sampler
+
+
 def sampling_spread(sampler: Sampler) -> dict[str, float]:
     """Effective fraction of stored episodes an episode sampler draws from, ``1 / (N sum p^2)``."""
-    if not isinstance(sampler, EpisodePrioritySampler) or not sampler.n_episodes:
+    if not isinstance(_shard(sampler), EpisodePrioritySampler) or not sampler.n_episodes:
         return {}
     n = sampler.n_episodes
     p = sampler.probabilities(torch.arange(n))
     return {"priority_ess_fraction": (1.0 / (n * p.square().sum())).item()}
+
+
+def beta_annealing(sampler: Sampler) -> LinearScheduler | None:
+    """PER's linear beta schedule over its draws (every worker's at once), or ``None`` for other samplers."""
+    per = _shard(sampler)
+    if not isinstance(per, PERSampler):
+        return None
+    return LinearScheduler(sampler, "beta", final_value=per.beta_end, num_steps=per.beta_anneal_draws)
 
 
 class Learner:
@@ -97,7 +112,7 @@ class Learner:
         self.cfg, self.agent, self.optimizer, self.replay, self.sampler, self.device = (
             cfg, agent, optimizer, replay, sampler, device)
         self.normalizer_feed = RelabelledTransitions(her)
-        self.beta_scheduler = sampler.beta_scheduler() if isinstance(sampler, PERSampler) else None
+        self.beta_scheduler = beta_annealing(sampler)
         self.totals: dict[str, torch.Tensor] = defaultdict(float)
 
     def store(self, episodes: TensorDictBase) -> None:
@@ -125,8 +140,9 @@ class Learner:
 
     def refit_sampler(self) -> None:
         """The sampler's once-an-epoch re-ranking of the stored episodes (MEP's density model)."""
-        if isinstance(self.sampler, EpisodePrioritySampler):
-            self.sampler.refit(self.replay.storage)
+        refit = getattr(self.sampler, "refit", None)
+        if refit is not None:
+            refit(self.replay.storage)
 
     def epoch_means(self) -> dict[str, float]:
         """Per-update means of the losses and weights since the last call, and the sampler's spread."""
@@ -189,7 +205,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     validate_config(cfg)
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
-    sampler = instantiate(cfg.sampler)  # here, so that a bad sampler argument fails before the envs start
+    sampler = make_sampler(cfg)  # here, so that a bad sampler argument fails before the envs start
     run_dir, resuming = prepare_run_dir(cfg, run_dir)
     device = resolve_device(cfg.device)
     warn_if_bf16_is_emulated(cfg.precision, device)
@@ -205,7 +221,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     if resuming:  # after every part is built: building one may draw from the restored random streams
         state = load_checkpoint(run_dir, map_location=device)
         start_epoch, wall_before = restore_training_state(state, cfg, agent, optimizer, replay, learner.beta_scheduler)
-    log = EpochLog(run_dir, start_epoch, cfg.logger)
+    log = EpochLog(run_dir, start_epoch, cfg.logger, labels={"replay": replay_layout(cfg)})
     run_start = time.perf_counter()
 
     progress = tqdm(range(start_epoch, cfg.epochs), initial=start_epoch, total=cfg.epochs, desc="epochs")

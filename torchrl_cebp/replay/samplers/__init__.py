@@ -5,6 +5,7 @@ from torchrl_cebp.replay.samplers.cper import CPERSampler
 from torchrl_cebp.replay.samplers.ebp import EBPSampler
 from torchrl_cebp.replay.samplers.mep import MEPSampler
 from torchrl_cebp.replay.samplers.per import PERSampler
+from torchrl_cebp.replay.samplers.per_worker import PerWorkerSampler, WorkerRows
 from torchrl_cebp.replay.samplers.uniform import UniformEpisodeSampler
 
 __all__ = [
@@ -15,6 +16,8 @@ __all__ = [
     "InitialCEBPSampler",
     "MEPSampler",
     "PERSampler",
+    "PerWorkerSampler",
     "ReleasedCEBPSampler",
     "UniformEpisodeSampler",
+    "WorkerRows",
 ]

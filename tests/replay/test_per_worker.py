@@ -1,0 +1,174 @@
+"""Baselines' per-worker replay: routing, per-worker draws and IS weights, equivalence for uniform HER, state."""
+import numpy as np
+import pytest
+import torch
+from scipy.stats import chi2_contingency
+from torchrl.data import TensorDictReplayBuffer
+from torchrl.data.replay_buffers.scheduler import LinearScheduler
+
+from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
+from tests.replay.test_samplers import hand_made, np_initial_cebp
+from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, make_replay_buffer
+from torchrl_cebp.samplers import (
+    InitialCEBPSampler,
+    MEPSampler,
+    PERSampler,
+    PerWorkerSampler,
+    UniformEpisodeSampler,
+    WorkerRows,
+)
+
+WORKERS, PER_WORKER = 4, 2  # 8 episodes a cycle: worker w's envs are 2w and 2w + 1
+CYCLE = WORKERS * PER_WORKER
+LOW, HIGH = np.array([1.05, 0.4, 0.4]), np.array([1.55, 1.11, np.inf])
+
+
+def initial_cebp_workers(workers=WORKERS):
+    return PerWorkerSampler(*[InitialCEBPSampler(workspace=PUSH_WORKSPACE) for _ in range(workers)],
+                            episodes_per_worker=PER_WORKER)
+
+
+def cycles(n_cycles):
+    return torch.cat([hand_made(CYCLE, seed=s) for s in range(n_cycles)])
+
+
+def test_each_worker_gets_its_own_envs_episodes_and_draws_its_share_of_the_batch():
+    sampler = initial_cebp_workers()
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(40 * CYCLE * T), sampler=sampler, dim_extend=0, batch_size=64)
+    for data in cycles(3).split(CYCLE):
+        rb.extend(data)
+    assert [shard.n_episodes for shard in sampler.samplers] == [3 * PER_WORKER] * WORKERS
+    rows = rb.sample()["index"][:, 0]
+    worker_of_row = rows % CYCLE // PER_WORKER
+    assert worker_of_row.tolist() == sum(([w] * 16 for w in range(WORKERS)), [])
+
+
+def test_worker_rows_read_only_that_workers_episodes():
+    storage = EpisodeStorage(4 * CYCLE * T)
+    data = cycles(2)
+    storage.set(torch.arange(2 * CYCLE), data)
+    view = WorkerRows(storage, worker=3, workers=WORKERS, episodes_per_worker=PER_WORKER)
+    assert view.shape == (4, T) and view.max_size == 8 * T and len(view) == 4 * T
+    expected = data[torch.tensor([6, 7, 14, 15])]
+    assert (view.get(slice(None)) == expected).all()
+    assert (view.get(torch.tensor([2, 0])) == expected[torch.tensor([2, 0])]).all()
+
+
+def test_importance_weights_are_normalised_within_each_workers_draw():
+    sampler = initial_cebp_workers(workers=2)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(1200 * T), sampler=sampler, dim_extend=0, batch_size=1024)
+    data = torch.cat([hand_made(4, seed=s) for s in range(150)])  # 300 episodes per worker, past the 256 warm-up
+    rb.extend(data)
+    batch = rb.sample()
+    priority = np_initial_cebp(data, LOW, HIGH)
+    for part in batch.split(512):
+        p = priority[part["index"][:, 0].numpy()]
+        w = p ** -0.7
+        np.testing.assert_allclose(part["priority_weight"].numpy(), w / w.max(), rtol=1e-5)
+        assert part["priority_weight"].max() == 1.0
+
+
+def test_weights_switch_on_at_256_episodes_per_worker_not_in_all():
+    data = torch.cat([hand_made(4, seed=s) for s in range(75)])  # 300 episodes: 150 per worker of 2
+    merged = TensorDictReplayBuffer(storage=EpisodeStorage(1200 * T), sampler=InitialCEBPSampler(workspace=PUSH_WORKSPACE),
+                                    dim_extend=0, batch_size=512)
+    per_worker = TensorDictReplayBuffer(storage=EpisodeStorage(1200 * T), sampler=initial_cebp_workers(workers=2),
+                                        dim_extend=0, batch_size=512)
+    merged.extend(data)
+    per_worker.extend(data)
+    assert merged.sample()["priority_weight"].min() < 0.5
+    assert torch.equal(per_worker.sample()["priority_weight"], torch.ones(512))
+
+
+def test_uniform_her_draws_the_merged_buffers_distribution():
+    """Chi-square homogeneity of the episode and step counts of the two layouts (both are uniform)."""
+    data = cycles(12)
+    draws = {}
+    for layout in ("merged", "per_worker"):
+        sampler = (UniformEpisodeSampler() if layout == "merged"
+                   else PerWorkerSampler(*[UniformEpisodeSampler() for _ in range(WORKERS)], episodes_per_worker=PER_WORKER))
+        her = HindsightRelabel(sparse_reward, future_p=0.8)
+        rb = make_replay_buffer(sampler, her, capacity=12 * CYCLE * T, batch_size=2048,
+                                generator=torch.Generator().manual_seed(1 if layout == "merged" else 2))
+        rb.extend(data)
+        draws[layout] = torch.cat([rb.sample()["index"] for _ in range(20)])
+    for column, bins in ((0, 12 * CYCLE), (1, T)):
+        table = np.stack([np.bincount(draws[layout][:, column].numpy(), minlength=bins) for layout in draws])
+        assert chi2_contingency(table).pvalue > 1e-3, table
+
+
+def test_per_shards_route_td_errors_and_anneal_together():
+    capacity = 4 * CYCLE * T
+    sampler = PerWorkerSampler(*[PERSampler(capacity // WORKERS, beta_anneal_draws=10) for _ in range(WORKERS)],
+                               episodes_per_worker=PER_WORKER)
+    rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward), capacity=capacity, batch_size=32)
+    rb.extend(make_episodes(CYCLE))
+    batch = rb.sample()
+    batch["td_error"] = torch.zeros(32)
+    batch["td_error"][:8] = 100.0  # worker 0's part
+    rb.update_tensordict_priority(batch)
+    rows = torch.cat([rb.sample()["index"][:8, 0] for _ in range(20)])
+    hot = batch["index"][:8, 0].unique()
+    assert torch.isin(rows, hot).float().mean() > 0.9  # worker 0 now draws its high-error transitions
+    scheduler = LinearScheduler(sampler, "beta", final_value=1.0, num_steps=10)
+    for _ in range(10):
+        scheduler.step()
+    assert [shard.beta for shard in sampler.samplers] == pytest.approx([1.0] * WORKERS)
+
+
+def test_a_per_shard_smaller_than_its_workers_rows_is_refused():
+    sampler = PerWorkerSampler(PERSampler(10 * T), PERSampler(10 * T))
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(40 * T), sampler=sampler, dim_extend=0, batch_size=4)
+    with pytest.raises(ValueError, match="worker 0's PERSampler holds 500 transitions, but the worker owns 1000"):
+        rb.extend(make_episodes(2))
+
+
+def test_mep_refits_each_worker_on_its_own_episodes():
+    sampler = PerWorkerSampler(*[MEPSampler(seed=w) for w in range(2)])
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(100 * T), sampler=sampler, dim_extend=0, batch_size=8)
+    rb.extend(make_episodes(40))
+    sampler.refit(rb.storage)
+    assert all(shard.n_episodes == 20 for shard in sampler.samplers)
+
+
+@pytest.mark.parametrize("make_shard", [lambda: InitialCEBPSampler(workspace=PUSH_WORKSPACE), lambda: PERSampler(6 * CYCLE * T // WORKERS)])
+def test_state_and_files_restore_every_worker_and_the_same_draws(tmp_path, make_shard):
+    def build():
+        sampler = PerWorkerSampler(*[make_shard() for _ in range(WORKERS)], episodes_per_worker=PER_WORKER)
+        return make_replay_buffer(sampler, HindsightRelabel(sparse_reward), capacity=6 * CYCLE * T, batch_size=64,
+                                  generator=torch.Generator().manual_seed(0))
+
+    original = build()
+    for data in cycles(3).split(CYCLE):
+        original.extend(data)
+    from_state, from_files = build(), build()
+    from_state.load_state_dict(original.state_dict())
+    original.dumps(tmp_path)
+    from_files.loads(tmp_path)
+    assert sorted(p.name for p in tmp_path.joinpath("sampler").iterdir()) == [
+        "per_worker.json", *(f"worker{w}" for w in range(WORKERS))]
+    for rb in (from_state, from_files):
+        rb.set_rng(torch.Generator().manual_seed(5))
+    original.set_rng(torch.Generator().manual_seed(5))
+    expected = original.sample()["index"]
+    assert torch.equal(from_state.sample()["index"], expected)
+    assert torch.equal(from_files.sample()["index"], expected)
+
+
+def test_a_state_of_another_worker_layout_is_refused():
+    saved = initial_cebp_workers(workers=2).state_dict()
+    with pytest.raises(ValueError, match="the saved replay has 2 workers of 2 episodes per cycle; this PerWorkerSampler has 4 of 2"):
+        initial_cebp_workers().load_state_dict(saved)
+
+
+def test_a_batch_that_does_not_split_over_the_workers_is_refused():
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(40 * T), sampler=initial_cebp_workers(), dim_extend=0, batch_size=30)
+    rb.extend(make_episodes(CYCLE))
+    with pytest.raises(ValueError, match="batch_size=30 must be a multiple of workers=4"):
+        rb.sample()
+
+
+def test_one_sampler_instance_for_two_workers_is_refused():
+    shared = UniformEpisodeSampler()
+    with pytest.raises(ValueError, match="separate sampler instance"):
+        PerWorkerSampler(shared, shared)
