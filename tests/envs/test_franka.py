@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import itertools
+
 import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
 from torchrl_cebp.envs import FRANKA_TASK, FrankaPickPlaceEnv, make_franka
-from torchrl_cebp.envs.franka import FRANKA_GYM_ID, FrankaLayout, sample_goal
+from torchrl_cebp.envs.franka import FRANKA_GYM_ID, HAND_BODY, HAND_QUAT, FrankaLayout, sample_goal
 
 
 @pytest.fixture(scope="module")
@@ -111,3 +113,30 @@ def test_grasped_cube_survives_fast_random_moves(env):
             obs, *_ = env.step(np.append(rng.uniform(-1, 1, 3), -1.0).astype(np.float32))
         held += np.linalg.norm(obs["observation"][6:9]) < 0.03
     assert held >= 8, held
+
+
+def test_hand_stays_in_the_workspace_box(env):
+    # Unclamped, full-speed moves took the grip point past the table's edge (x = -0.19), below its top and 0.95 m up.
+    box = env.layout.workspace
+    for axis, sign in itertools.product(range(3), (-1.0, 1.0)):
+        obs, _ = env.reset(seed=0)
+        action = np.zeros(4, np.float32)
+        action[axis], action[3] = sign, 1.0
+        for _ in range(25):
+            obs, *_ = env.step(action)
+            grip = obs["observation"][:3]
+            assert (grip >= np.subtract(box.low, 0.005)).all() and (grip <= np.add(box.high, 0.005)).all(), grip
+        face = box.high[axis] if sign > 0 else box.low[axis]
+        assert grip[axis] == pytest.approx(face, abs=0.005)
+
+
+def test_every_corner_of_the_workspace_is_reached_with_the_hand_down(env):
+    # Beyond the arm's reach (the loop's former box went to x = 0.8) the wrist stops at its joint limit and the
+    # weld swings the hand by centimetres, tilted by up to 20 degrees.
+    box = env.layout.workspace
+    for corner in itertools.product(*zip(box.low, box.high)):
+        obs, _ = env.reset(seed=0)
+        obs, _ = drive(env, obs, np.array(corner), gripper=1.0, steps=40)
+        assert np.linalg.norm(obs["observation"][:3] - corner) < 0.005, corner
+        tilt = 2 * np.degrees(np.arccos(min(1.0, abs(np.dot(env.data.body(HAND_BODY).xquat, HAND_QUAT)))))
+        assert tilt < 3.0, (corner, tilt)

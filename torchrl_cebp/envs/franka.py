@@ -7,7 +7,8 @@ on a table, and a touch sensor covers each finger's inner pad. Sites, joints and
 follow gymnasium-robotics' Fetch naming, so Fetch's observation (25), goal layout (3) and 4-D action
 (``dx, dy, dz`` scaled by 0.05, gripper) are reused unchanged (paper's Sim2Real section;
 ORIGINAL_CODE.md §7 for the goal space: 100-step episodes, goal = table centre +- 0.1, in the air with
-probability 0.5 at height U(0, 0.45), object = centre +- 0.1).
+probability 0.5 at height U(0, 0.45), object = centre +- 0.1). Every move is clamped to the grip point's
+:class:`Workspace` box, as the Sim2Real loop clamps the real arm's.
 
 The robot frame is the world frame: the Panda base sits at the origin on the table top (``z = 0``).
 """
@@ -34,6 +35,7 @@ __all__ = [
     "FRANKA_TASK",
     "FrankaLayout",
     "FrankaPickPlaceEnv",
+    "Workspace",
     "franka_spec",
     "make_franka",
     "register",
@@ -64,6 +66,31 @@ _FINGERS = (("left", "panda0_leftfinger", -1.0), ("right", "panda0_rightfinger",
 
 
 @dataclass(frozen=True)
+class Workspace:
+    """The box the grip point may reach and the longest displacement one step may command (robot frame, metres).
+
+    Around the goal space (5 cm beyond it in x, 10 cm in y), from the table top to above the highest goal, and
+    within the arm's reach with the hand pointing down: further out (e.g. x = 0.68 at 0.45 m up) the wrist
+    joint stops at its limit and the weld swings the hand by centimetres every step. The simulator clamps every
+    move to this box, and so does the Sim2Real loop on the real arm.
+
+    Example:
+        >>> ws = Workspace(low=(0.3, -0.2, 0.0), high=(0.7, 0.2, 0.5), max_step=0.05)
+        >>> ws.clamp(np.array([0.69, 0.0, 0.2]), np.array([0.05, 0.0, 0.0])).round(3).tolist()
+        [0.01, 0.0, 0.0]
+    """
+
+    low: tuple[float, float, float] = (0.3, -0.2, 0.01)
+    high: tuple[float, float, float] = (0.65, 0.2, 0.48)
+    max_step: float = 0.05
+
+    def clamp(self, position: np.ndarray, delta: np.ndarray) -> np.ndarray:
+        """``delta`` limited to ``max_step`` per axis and so that ``position + delta`` stays in the box."""
+        delta = np.clip(delta, -self.max_step, self.max_step)
+        return np.clip(position + delta, self.low, self.high) - position
+
+
+@dataclass(frozen=True)
 class FrankaLayout:
     """Where things are in the Franka scene (robot frame, metres) and what counts as success.
 
@@ -83,6 +110,7 @@ class FrankaLayout:
     max_episode_steps: int = 100
     # Height of the grip point above the cube centre at the start of an episode.
     gripper_start_height: float = 0.2
+    workspace: Workspace = Workspace()
 
     @property
     def cube_centre_height(self) -> float:
@@ -276,7 +304,9 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
         self._utils.ctrl_set_action(self.model, self.data, action)
         self._utils.reset_mocap2body_xpos(self.model, self.data)
         self._mocap_start = self.data.mocap_pos[0].copy()
-        self._mocap_delta = action[:3].copy()
+        # Unclamped, the hand went wherever the arm reaches: past the table's edge, below its top, behind the base.
+        grip = self._utils.get_site_xpos(self.model, self.data, "robot0:grip")
+        self._mocap_delta = self.layout.workspace.clamp(grip, action[:3])
         self.data.mocap_quat[0] = HAND_QUAT
 
     def _mujoco_step(self, action: np.ndarray) -> None:

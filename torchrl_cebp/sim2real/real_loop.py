@@ -18,7 +18,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from torchrl_cebp.envs.franka import FrankaLayout, sample_goal
+from torchrl_cebp.envs.franka import FrankaLayout, Workspace, sample_goal
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource
 from torchrl_cebp.sim2real.calibration import TableCalibration
@@ -41,26 +41,6 @@ class SafetyStatus(IntEnum):
     def reason(self) -> str:
         """``"ok"``, ``"markers"``, ``"cube"``, ``"camera_lost"`` or ``"invalid_action"``."""
         return self.name.lower()
-
-
-@dataclass(frozen=True)
-class Workspace:
-    """The box the end effector may reach and the longest displacement one step may command (robot frame).
-
-    Example:
-        >>> ws = Workspace(low=(0.3, -0.2, 0.0), high=(0.7, 0.2, 0.5), max_step=0.05)
-        >>> ws.clamp(np.array([0.69, 0.0, 0.2]), np.array([0.05, 0.0, 0.0])).round(3).tolist()
-        [0.01, 0.0, 0.0]
-    """
-
-    low: tuple[float, float, float] = (0.3, -0.3, 0.01)
-    high: tuple[float, float, float] = (0.8, 0.3, 0.5)
-    max_step: float = 0.05
-
-    def clamp(self, position: np.ndarray, delta: np.ndarray) -> np.ndarray:
-        """``delta`` limited to ``max_step`` per axis and so that ``position + delta`` stays in the box."""
-        delta = np.clip(delta, -self.max_step, self.max_step)
-        return np.clip(position + delta, self.low, self.high) - position
 
 
 class ParallaxCorrection:
@@ -190,7 +170,7 @@ class RealLoopEnv(EnvBase):
         backend: the robot.
         camera: frame source (BGR).
         perception: the calibrated cube perception (reads ``"pixels"``).
-        workspace: end-effector box and max step.
+        workspace: end-effector box and max step; ``None`` takes the layout's, the box the simulator trains in.
         layout: goal space, success threshold, episode length and cube size (the Franka sim's).
         parallax: optional correction of the perceived cube position for an oblique camera.
         more_views: further cameras, each with its own perception and parallax correction.
@@ -211,7 +191,7 @@ class RealLoopEnv(EnvBase):
         backend: RobotBackend,
         camera: FrameSource,
         perception: CubePerception,
-        workspace: Workspace = Workspace(),
+        workspace: Workspace | None = None,
         layout: FrankaLayout = FrankaLayout(),
         parallax: ParallaxCorrection | None = None,
         goal: np.ndarray | None = None,
@@ -219,7 +199,8 @@ class RealLoopEnv(EnvBase):
         more_views: Sequence[CameraView] = (),
     ) -> None:
         super().__init__(device="cpu", batch_size=torch.Size([]))
-        self.backend, self.workspace, self.layout = backend, workspace, layout
+        self.backend, self.layout = backend, layout
+        self.workspace = layout.workspace if workspace is None else workspace
         self.views = (CameraView(camera, perception, parallax), *more_views)
         self.fixed_goal = None if goal is None else np.asarray(goal, np.float64)
         self.dt = dt
