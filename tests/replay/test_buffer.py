@@ -168,3 +168,19 @@ def test_pin_memory_pins_the_batches():
             rb.sample()
         return
     assert rb.sample()["observation"].is_pinned()
+
+
+@pytest.mark.parametrize("name", ["cebp", "per"])
+@pytest.mark.parametrize("saved_rows, rows", [(20, 10), (10, 20)])
+@pytest.mark.parametrize("how", ["load_state_dict", "loads"])
+def test_a_state_of_another_capacity_is_refused_with_the_capacity_it_needs(name, saved_rows, rows, how, tmp_path):
+    saved = make_replay_buffer(SAMPLERS[name](saved_rows * T), HindsightRelabel(sparse_reward), capacity=saved_rows * T)
+    saved.extend(make_episodes(5))
+    other = make_replay_buffer(SAMPLERS[name](rows * T), HindsightRelabel(sparse_reward), capacity=rows * T)
+    expected = rf"holds {saved_rows} episodes of {T} steps.*this one {rows}.*capacity={saved_rows * T}"
+    with pytest.raises(ValueError, match=expected):
+        if how == "loads":
+            saved.dumps(tmp_path)
+            other.loads(tmp_path)
+        else:
+            other.load_state_dict(saved.state_dict())

@@ -75,19 +75,35 @@ class _EpisodeRows:
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
-        rows = state_dict.get("rows")
-        if rows is not None:  # the filled rows, back into a storage of the full capacity
-            filled = TensorDict().load_state_dict(state_dict[_upstream.STORAGE_STATE_KEY], strict=False)
-            full = filled.apply(lambda t: torch.zeros((rows, *t.shape[1:]), dtype=t.dtype),
-                                batch_size=[rows, *filled.shape[1:]])
-            full[: filled.shape[0]] = filled
-            state_dict = {**state_dict, _upstream.STORAGE_STATE_KEY: full.state_dict()}
+        if state_dict.get("initialized"):
+            saved = TensorDict().load_state_dict(state_dict[_upstream.STORAGE_STATE_KEY], strict=False)
+            # Our states keep the filled rows and the row count; TorchRL's (and older ones) every row.
+            rows = state_dict.get("rows", saved.shape[0])
+            self._check_saved_rows(rows, saved.shape[1])
+            if "rows" in state_dict:  # the filled rows, back into a storage of the full capacity
+                full = saved.apply(lambda t: torch.zeros((rows, *t.shape[1:]), dtype=t.dtype),
+                                   batch_size=[rows, *saved.shape[1:]])
+                full[: saved.shape[0]] = saved
+                state_dict = {**state_dict, _upstream.STORAGE_STATE_KEY: full.state_dict()}
         super().load_state_dict(state_dict)
         self._lengths = None
 
     def loads(self, path: Any) -> None:
+        saved_shape = TensorDict.load_memmap(path).shape  # memory-mapped: reading the shape loads no data
+        if len(saved_shape) >= 2:
+            self._check_saved_rows(saved_shape[0], saved_shape[1])
         super().loads(path)
         self._lengths = None
+
+    def _check_saved_rows(self, rows: int, row_length: int) -> None:
+        """Refuses a saved storage of another number of episode rows: TorchRL would fail on the copy, or adopt its size."""
+        own_rows = self.max_size // row_length
+        if rows != own_rows:
+            raise ValueError(
+                f"the saved buffer holds {rows} episodes of {row_length} steps (capacity {rows * row_length} "
+                f"transitions), this one {own_rows} (capacity {self.max_size}): build the buffer with "
+                f"capacity={rows * row_length} to load it"
+            )
 
 
 @dataclass(frozen=True)

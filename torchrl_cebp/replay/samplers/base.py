@@ -167,8 +167,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
             self._lengths = torch.zeros(n_rows, dtype=torch.long)
         elif self._tree.size != n_rows:
             raise ValueError(
-                f"{type(self).__name__} holds priorities for {self._tree.size} episode rows, "
-                f"but this storage has {n_rows}: use one sampler per buffer"
+                f"{type(self).__name__} holds priorities for {self._tree.size} episode rows (of another buffer, "
+                f"or loaded from the state of one), but this storage has {n_rows}: use one sampler per buffer"
             )
 
     def mark_update(
