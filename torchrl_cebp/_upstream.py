@@ -61,8 +61,9 @@ def prioritized_state(sampler: PrioritizedSampler) -> dict[str, Any]:
         "alpha": float(sampler.alpha),
         "beta": float(sampler.beta),
         "eps": float(sampler._eps),
-        "max_priority": None if max_value is None else torch.as_tensor(max_value),
-        "max_priority_index": None if max_index is None else torch.as_tensor(max_index),
+        # Copies, here and on load: TorchRL's loads() overwrites the live maximum in place.
+        "max_priority": None if max_value is None else torch.as_tensor(max_value).clone(),
+        "max_priority_index": None if max_index is None else torch.as_tensor(max_index).clone(),
         "sum_tree": torch.as_tensor(sampler._sum_tree[every]),
         "min_tree": torch.as_tensor(sampler._min_tree[every]),
     }
@@ -81,7 +82,8 @@ def load_prioritized_state(sampler: PrioritizedSampler, state: dict[str, Any]) -
     every = torch.arange(sampler.max_size)
     sampler._sum_tree[every] = state["sum_tree"]
     sampler._min_tree[every] = state["min_tree"]
-    sampler._max_priority = (state["max_priority"], state["max_priority_index"])
+    saved_maximum = (state["max_priority"], state["max_priority_index"])
+    sampler._max_priority = tuple(None if v is None else v.clone() for v in saved_maximum)
 
 
 def exclude_from_draws(sampler: PrioritizedSampler, index: torch.Tensor) -> None:

@@ -1,4 +1,5 @@
 """Each sampler's episode frequencies and weights against the formulas, computed by hand."""
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -8,8 +9,9 @@ from scipy.stats import chisquare, rankdata
 from tensordict import TensorDict
 from torchrl.data import TensorDictReplayBuffer
 
-from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes
-from torchrl_cebp.replay import EpisodeStorage, episode_lengths
+from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
+from tests.replay.test_buffer import SAMPLERS
+from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, episode_lengths, make_replay_buffer
 from torchrl_cebp.replay.episodes import valid_steps
 from torchrl_cebp.samplers import (
     CEBPSampler,
@@ -246,3 +248,51 @@ def test_released_cebp_mask_from_the_named_layout_repeats_the_recorded_prioritie
     priority = ReleasedCEBPSampler(workspace=PUSH_WORKSPACE).episode_priority(episodes, valid)
     torch.testing.assert_close(priority, recorded["priority"], rtol=1e-12, atol=0.0)
     assert priority.min() < 1e-4 < priority.max()
+
+
+def tensors_of(state, path=()):
+    """Every tensor of a nested state, by its path."""
+    if isinstance(state, torch.Tensor):
+        return {path: state}
+    if isinstance(state, dict):
+        return {p: t for key, value in state.items() for p, t in tensors_of(value, (*path, key)).items()}
+    if isinstance(state, (tuple, list)):
+        return {p: t for i, value in enumerate(state) for p, t in tensors_of(value, (*path, i)).items()}
+    return {}
+
+
+def scribble_over(state):
+    for tensor in tensors_of(state).values():
+        if tensor.is_floating_point():
+            tensor.mul_(3.0).add_(1.0)
+
+
+def assert_same_state(got, expected):
+    got, expected = tensors_of(got), tensors_of(expected)
+    assert got.keys() == expected.keys()
+    for path, tensor in expected.items():
+        assert torch.equal(got[path], tensor), path
+
+
+@pytest.mark.parametrize("name", sorted(SAMPLERS))
+def test_a_sampler_state_is_a_copy_both_ways(name):
+    def filled():
+        rb = make_replay_buffer(SAMPLERS[name](20 * T), HindsightRelabel(sparse_reward), capacity=20 * T, batch_size=64)
+        rb.extend(make_episodes(6))
+        if isinstance(rb.sampler, MEPSampler):
+            rb.sampler.refit(rb.storage)
+        batch = rb.sample()
+        batch.set("td_error", torch.rand(64))
+        rb.update_tensordict_priority(batch)  # PER: a running maximum priority
+        return rb.sampler
+
+    sampler = filled()
+    state = sampler.state_dict()
+    expected = copy.deepcopy(state)
+    scribble_over(state)  # what the saved state goes through does not reach the sampler...
+    assert_same_state(sampler.state_dict(), expected)
+    loaded = filled()
+    given = copy.deepcopy(expected)
+    loaded.load_state_dict(given)
+    scribble_over(given)  # ...nor what the loaded state goes through afterwards
+    assert_same_state(loaded.state_dict(), expected)

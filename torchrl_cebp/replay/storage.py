@@ -96,7 +96,7 @@ class _EpisodeRows:
         self._lengths = None
 
     def _check_saved_rows(self, rows: int, row_length: int) -> None:
-        """Refuses a saved storage of another number of episode rows: TorchRL would fail on the copy, or adopt its size."""
+        """Refuses a saved storage of another number of rows: TorchRL would fail on the copy, or adopt its size."""
         own_rows = self.max_size // row_length
         if rows != own_rows:
             raise ValueError(

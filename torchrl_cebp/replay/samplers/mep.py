@@ -138,7 +138,7 @@ class MEPSampler(EpisodePrioritySampler):
         state["n_refits"] = self._n_refits
         if self._mixture is not None:
             for name in MIXTURE_STATE:
-                state[f"mixture_{name}"] = torch.as_tensor(np.asarray(getattr(self._mixture, name)))
+                state[f"mixture_{name}"] = torch.tensor(np.asarray(getattr(self._mixture, name)))  # a copy
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
@@ -149,7 +149,7 @@ class MEPSampler(EpisodePrioritySampler):
         if f"mixture_{MIXTURE_STATE[0]}" in state_dict:
             self._mixture = self._new_mixture()
             for name in MIXTURE_STATE:
-                setattr(self._mixture, name, state_dict[f"mixture_{name}"].numpy())
+                setattr(self._mixture, name, state_dict[f"mixture_{name}"].numpy().copy())
             self._mixture.n_features_in_ = self._mixture.means_.shape[1]
 
     def __repr__(self) -> str:
