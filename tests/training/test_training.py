@@ -271,6 +271,14 @@ def test_comparison_stage_continues_where_it_stopped(tmp_path):
     assert rows(her)[0] == first_epoch[0]  # the finished epoch was not redone
 
 
+def test_per_worker_and_merged_runs_get_their_own_folders(tmp_path):
+    result = _cli("-m", "+comparison=push_standard", *TINY, "epochs=1", "workers=2", "seed=0", "sampler=her",
+                  "replay.per_worker=true,false", "hydra/launcher=basic", f"hydra.sweep.dir={tmp_path}")
+    assert result.returncode == 0, result.stderr
+    for folder, layout in (("paper-per_worker", "per_worker"), ("paper", "merged")):
+        assert rows(tmp_path / f"push-standard/her/{folder}/seed0/progress.csv")[0]["replay"] == layout
+
+
 def test_temperature_stage_gives_each_temperature_its_own_runs(tmp_path):
     result = _tiny_stage("push_temperature", tmp_path, "sampler.temperature=0.1,1.0")
     assert result.returncode == 0, result.stderr

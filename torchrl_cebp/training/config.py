@@ -43,6 +43,22 @@ if not OmegaConf.has_resolver("env_label"):
     OmegaConf.register_new_resolver("env_label", env_label)
 
 
+def replay_label(workers: int, per_worker: bool) -> str:
+    """The run folder's suffix after the preset: ``-per_worker`` for per-worker replay of several workers, else none.
+
+    Runs of the merged buffer keep the folders they had before per-worker replay existed.
+
+    Examples:
+        >>> replay_label(8, True), replay_label(8, False), replay_label(1, True)
+        ('-per_worker', '', '')
+    """
+    return "-per_worker" if workers > 1 and per_worker else ""
+
+
+if not OmegaConf.has_resolver("replay_label"):
+    OmegaConf.register_new_resolver("replay_label", replay_label)
+
+
 class ConfigError(ValueError):
     """A config value outside its allowed range or set."""
 
