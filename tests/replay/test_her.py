@@ -164,3 +164,20 @@ def test_a_buffer_with_her_copies_and_the_copy_draws_what_the_original_draws(cop
     for _ in range(2):
         expected, got = rb.sample(), copied.sample()
         assert (expected == got).all()
+
+
+def test_her_draws_from_the_buffer_generator_whose_state_the_buffer_state_keeps():
+    def buffer(seed):
+        rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward, future_p=0.5), capacity=10 * T,
+                                batch_size=256, generator=torch.Generator().manual_seed(seed))
+        rb.extend(labelled_episodes(4))
+        return rb
+
+    original = buffer(0)
+    original.sample()
+    restored = buffer(1)
+    restored.load_state_dict(original.state_dict())
+    for _ in range(2):
+        assert (original.sample() == restored.sample()).all()
+    with pytest.raises(TypeError, match="generator"):  # no generator of its own, which the buffer's state would miss
+        HindsightRelabel(sparse_reward, generator=torch.Generator())

@@ -57,8 +57,10 @@ class HindsightRelabel(SampleUnit):
         end_key: the flag that ends an episode before its row does.
         relabelled_key: a bool entry of the sample info telling which transitions were relabelled
             (``None`` to omit it).
-        generator: random source of the coin and the goal choice; by default the generator the
-            buffer was given (``generator=`` or ``set_rng``), else torch's global one.
+
+    In a buffer the coin and the goal choice draw from the buffer's generator (``generator=`` or
+    ``set_rng``; else torch's global one), the one the sampler draws from: ``rb.state_dict()``
+    keeps its state, so a restored buffer relabels as the original would have.
 
     Examples:
         >>> import torch
@@ -92,7 +94,6 @@ class HindsightRelabel(SampleUnit):
         reward_key: NestedKey = ("next", "reward"),
         end_key: NestedKey = ("next", "done"),
         relabelled_key: NestedKey | None = "her_relabelled",
-        generator: torch.Generator | None = None,
     ) -> None:
         if strategy not in STRATEGIES:
             raise ValueError(f"unknown HER strategy {strategy!r}; valid strategies: {list(STRATEGIES)}")
@@ -107,7 +108,6 @@ class HindsightRelabel(SampleUnit):
         self.reward_key = reward_key
         self.end_key = end_key
         self.relabelled_key = relabelled_key
-        self.generator = generator
         self._pending = threading.local()  # expand() -> collate() of one draw, per sampling thread
 
     def goal_steps(
@@ -141,9 +141,8 @@ class HindsightRelabel(SampleUnit):
 
         The one relabelling both the replay draw and the trainer's normaliser feed use.
         ``lengths`` are the valid lengths of ``rows`` (or one length they all share), read from the
-        ``end_key`` flags when omitted.
+        ``end_key`` flags when omitted; ``generator`` drives the draws (torch's global RNG without one).
         """
-        generator = self.generator if generator is None else generator
         relabel, candidate = self._draw(episodes, rows, steps, generator, lengths)
         flat = torch.add(steps, rows, alpha=episodes.shape[1])
         stored_goal = episodes.get(self.goal_key).flatten(0, 1).index_select(0, flat)
@@ -192,7 +191,7 @@ class HindsightRelabel(SampleUnit):
                 "collate_fn=her.collate, ...)"
             )
         rows, steps = split_index(index)
-        generator = self.generator if self.generator is not None else _upstream.buffer_generator(storage)
+        generator = _upstream.buffer_generator(storage)
         lengths = None
         if isinstance(storage, _EpisodeRows) and storage.end_key == self.end_key:
             lengths = storage.common_length()
