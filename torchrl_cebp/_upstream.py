@@ -61,7 +61,7 @@ def prioritized_state(sampler: PrioritizedSampler) -> dict[str, Any]:
         "alpha": float(sampler.alpha),
         "beta": float(sampler.beta),
         "eps": float(sampler._eps),
-        # Copies, here and on load: TorchRL's loads() overwrites the live maximum in place.
+        # Copies, here and on load: a state shares no tensor with the sampler it came from or went into.
         "max_priority": None if max_value is None else torch.as_tensor(max_value).clone(),
         "max_priority_index": None if max_index is None else torch.as_tensor(max_index).clone(),
         "sum_tree": torch.as_tensor(sampler._sum_tree[every]),

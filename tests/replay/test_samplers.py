@@ -7,7 +7,7 @@ import pytest
 import torch
 from scipy.stats import chisquare, rankdata
 from tensordict import TensorDict
-from torchrl.data import TensorDictReplayBuffer
+from torchrl.data import PrioritizedSampler, TensorDictReplayBuffer
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
 from tests.replay.test_buffer import SAMPLERS
@@ -296,3 +296,56 @@ def test_a_sampler_state_is_a_copy_both_ways(name):
     loaded.load_state_dict(given)
     scribble_over(given)  # ...nor what the loaded state goes through afterwards
     assert_same_state(loaded.state_dict(), expected)
+
+
+@pytest.mark.parametrize("how", ["state_dict", "dumps"])
+def test_a_resumed_per_beta_anneal_goes_on_where_it_stopped(how, tmp_path):
+    def buffer():
+        rb = make_replay_buffer(PERSampler(10 * T, beta_anneal_draws=10), HindsightRelabel(sparse_reward),
+                                capacity=10 * T)
+        rb.extend(make_episodes(2))
+        return rb
+
+    original = buffer()
+    scheduler = original.sampler.beta_scheduler()
+    for _ in range(4):
+        scheduler.step()
+    restored = buffer()
+    if how == "dumps":
+        original.dumps(tmp_path)
+        restored.loads(tmp_path)
+    else:
+        restored.load_state_dict(original.state_dict())
+    resumed = restored.sampler.beta_scheduler()
+    for _ in range(3):
+        scheduler.step()
+        resumed.step()
+    assert restored.sampler.beta == pytest.approx(original.sampler.beta) == pytest.approx(0.4 + 0.6 * 7 / 10)
+
+
+def prioritized_buffer(sampler):
+    rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward), capacity=10 * T, batch_size=64)
+    rb.extend(make_episodes(3))
+    return rb
+
+
+@pytest.mark.parametrize("how", ["state_dict", "dumps"])
+@pytest.mark.parametrize("direction", ["ours_to_torchrl", "torchrl_to_ours"])
+def test_per_and_torchrl_prioritized_sampler_load_each_others_state(how, direction, tmp_path):
+    ours, torchrl = PERSampler(10 * T, alpha=0.7, beta=0.5), PrioritizedSampler(10 * T, alpha=0.7, beta=0.5)
+    source, target = (ours, torchrl) if direction == "ours_to_torchrl" else (torchrl, ours)
+    saved, loaded = prioritized_buffer(source), prioritized_buffer(target)
+    batch = saved.sample()
+    batch.set("td_error", torch.linspace(0.1, 5.0, 64))
+    saved.update_tensordict_priority(batch)
+    if how == "dumps":
+        source.dumps(tmp_path)
+        target.loads(tmp_path)
+    else:  # TorchRL's sampler reads the TorchRL form of ours: its C++ trees are no state a weights_only load takes
+        target.load_state_dict(PrioritizedSampler.state_dict(source) if source is ours else source.state_dict())
+    assert target.beta == source.beta and target.alpha == source.alpha
+    for rb in (saved, loaded):
+        rb.set_rng(torch.Generator().manual_seed(3))
+    drawn, again = saved.sample(), loaded.sample()
+    assert torch.equal(drawn["index"], again["index"])
+    torch.testing.assert_close(drawn["priority_weight"], again["priority_weight"])

@@ -1,6 +1,7 @@
 """Prioritized Experience Replay (PER, Schaul et al. 2016) over episode rows."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,9 @@ from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import episode_lengths, valid_steps
 from torchrl_cebp.replay.samplers.base import stored_rows
 
+# Written beside TorchRL's files by PERSampler.dumps.
+SCHEDULER_FILE = "beta_scheduler.json"
+
 
 class PERSampler(PrioritizedSampler):
     """TorchRL's segment-tree :class:`~torchrl.data.PrioritizedSampler` with beta annealed 0.4 -> 1.
@@ -26,6 +30,13 @@ class PERSampler(PrioritizedSampler):
     Beta grows linearly from ``beta`` to ``beta_end`` over ``beta_anneal_draws``
     draws, as in baselines' PER over training, through the TorchRL scheduler
     :meth:`beta_scheduler` returns: step it once per draw.
+
+    :meth:`state_dict` holds plain tensors and numbers (``torch.load(weights_only=True)``
+    refuses the C++ trees of TorchRL's own), the scheduler's step count included, so a
+    resumed anneal goes on where it stopped. :meth:`load_state_dict` also reads the state
+    of a TorchRL :class:`~torchrl.data.PrioritizedSampler`; give one of those
+    ``PrioritizedSampler.state_dict(per_sampler)``, this sampler's state in TorchRL's form.
+    :meth:`dumps` writes TorchRL's files, which either sampler :meth:`loads`.
 
     Args:
         capacity: storage capacity in transitions (the buffer's, e.g. 1e6).
@@ -66,14 +77,21 @@ class PERSampler(PrioritizedSampler):
         *,
         end_key: NestedKey = ("next", "done"),
     ) -> None:
-        super().__init__(int(capacity), alpha=alpha, beta=beta, eps=eps)
+        super().__init__(int(capacity), alpha=alpha, beta=float(beta), eps=eps)
         self.beta_end = float(beta_end)
         self.beta_anneal_draws = int(beta_anneal_draws)
         self.end_key = end_key
+        self._beta_scheduler = self._new_beta_scheduler()
+
+    def _new_beta_scheduler(self) -> LinearScheduler:
+        return LinearScheduler(self, "beta", final_value=self.beta_end, num_steps=self.beta_anneal_draws)
 
     def beta_scheduler(self) -> LinearScheduler:
-        """TorchRL's linear scheduler taking beta from its current value to ``beta_end`` in ``beta_anneal_draws`` steps."""
-        return LinearScheduler(self, "beta", final_value=self.beta_end, num_steps=self.beta_anneal_draws)
+        """The sampler's TorchRL linear scheduler: beta from ``beta`` to ``beta_end`` in ``beta_anneal_draws`` steps.
+
+        One per sampler, so that its step count is part of the sampler's state (and of the buffer's).
+        """
+        return self._beta_scheduler
 
     def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
         super().mark_update(index, storage=storage)
@@ -88,21 +106,70 @@ class PERSampler(PrioritizedSampler):
 
     def state_dict(self) -> dict[str, Any]:
         """Plain tensors and numbers only (TorchRL's own holds C++ trees, which ``weights_only`` loads refuse)."""
-        return _upstream.prioritized_state(self)
+        return {**_upstream.prioritized_state(self), "beta_scheduler": self._beta_scheduler.state_dict()}
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Loads this class's state, or a TorchRL :class:`~torchrl.data.PrioritizedSampler`'s, of the same capacity."""
+        # None in a TorchRL sampler's state, nor in ours from before the scheduler was part of it.
+        scheduler_state = state_dict.get("beta_scheduler")
+        if "_sum_tree" in state_dict:  # TorchRL's: its C++ trees (ours holds their values as tensors)
+            state_dict = _plain_state(state_dict)
+        saved_capacity = state_dict["sum_tree"].numel()
+        if saved_capacity != self.max_size:
+            raise ValueError(
+                f"the saved PER state holds priorities for {saved_capacity} transitions, this PERSampler for "
+                f"{self.max_size}: build it with capacity={saved_capacity} to load it"
+            )
         _upstream.load_prioritized_state(self, state_dict)
+        if scheduler_state is not None:
+            self._beta_scheduler.load_state_dict(scheduler_state)
 
     def dumps(self, path: str | Path) -> None:
-        path = Path(path)
-        path.mkdir(parents=True, exist_ok=True)
-        torch.save(self.state_dict(), path / "per_sampler.pt")
+        """TorchRL's files (trees as memory maps, numbers as JSON), and the beta scheduler's state beside them."""
+        super().dumps(path)
+        (Path(path) / SCHEDULER_FILE).write_text(json.dumps(self._beta_scheduler.state_dict()))
 
     def loads(self, path: str | Path) -> None:
-        self.load_state_dict(torch.load(Path(path) / "per_sampler.pt", weights_only=True))
+        # TorchRL's reader, into a sampler of its own: its loads() fails on a sampler that already holds priorities.
+        saved = PrioritizedSampler(self.max_size, alpha=self.alpha, beta=self.beta)
+        saved.loads(path)
+        state = PrioritizedSampler.state_dict(saved)
+        scheduler = Path(path) / SCHEDULER_FILE
+        if scheduler.is_file():  # a dump of TorchRL's own sampler has none
+            state["beta_scheduler"] = json.loads(scheduler.read_text())
+        self.load_state_dict(state)
+
+    # TorchRL's __getstate__ refuses to send the sampler to another process; the scheduler holds a module
+    # (its numpy backend), which pickle refuses, so a copy carries the scheduler's state instead.
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(super().__getstate__())
+        state["_beta_scheduler"] = self._beta_scheduler.state_dict()
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        scheduler_state = state.pop("_beta_scheduler")
+        self.__dict__.update(state)
+        self._beta_scheduler = self._new_beta_scheduler()
+        self._beta_scheduler.load_state_dict(scheduler_state)
 
     def __repr__(self) -> str:
         return (
             f"PERSampler(alpha={self.alpha}, beta={self.beta:.3f} -> {self.beta_end} over "
             f"{self.beta_anneal_draws} draws)"
         )
+
+
+
+def _plain_state(torchrl_state: dict[str, Any]) -> dict[str, Any]:
+    """A TorchRL ``PrioritizedSampler`` state in :meth:`PERSampler.state_dict`'s form (without a scheduler)."""
+    every = torch.arange(torchrl_state["_sum_tree"].size)
+    max_value, max_index = torchrl_state["_max_priority"]
+    return {
+        "alpha": float(torchrl_state["_alpha"]),
+        "beta": float(torchrl_state["_beta"]),
+        "eps": float(torchrl_state["_eps"]),
+        "max_priority": None if max_value is None else torch.as_tensor(max_value),
+        "max_priority_index": None if max_index is None else torch.as_tensor(max_index).long(),
+        "sum_tree": torch.as_tensor(torchrl_state["_sum_tree"][every]),
+        "min_tree": torch.as_tensor(torchrl_state["_min_tree"][every]),
+    }
