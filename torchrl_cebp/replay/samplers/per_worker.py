@@ -29,6 +29,14 @@ from torchrl.data.replay_buffers.storages import Storage
 from torchrl_cebp.replay.samplers.base import split_index
 
 
+def storage_rows(
+    local_rows: torch.Tensor, worker: int | torch.Tensor, workers: int, episodes_per_worker: int
+) -> torch.Tensor:
+    """The storage rows of ``worker``'s (one, or one per row) ``local_rows`` (see :class:`WorkerRows`)."""
+    e = episodes_per_worker
+    return local_rows // e * (e * workers) + worker * e + local_rows % e
+
+
 class WorkerRows:
     """Worker ``w``'s episode rows of a ``[rows, T]`` storage, as a storage of their own (a view, no copy).
 
@@ -57,14 +65,13 @@ class WorkerRows:
     def __init__(self, storage: Storage, worker: int, workers: int, episodes_per_worker: int) -> None:
         self.storage = storage
         self.worker, self.workers, self.episodes_per_worker = worker, workers, episodes_per_worker
-        self.block = workers * episodes_per_worker
+        self.block = workers * episodes_per_worker  # the rows one cycle of every worker's envs fills
 
     def global_rows(self, local_rows: torch.Tensor) -> torch.Tensor:
         """The storage rows of this worker's ``local_rows``."""
-        e = self.episodes_per_worker
-        return local_rows // e * self.block + self.worker * e + local_rows % e
+        return storage_rows(local_rows, self.worker, self.workers, self.episodes_per_worker)
 
-    def _rows_within(self, global_rows: int) -> int:
+    def rows_within(self, global_rows: int) -> int:
         """How many of the first ``global_rows`` storage rows are this worker's."""
         full, rest = divmod(global_rows, self.block)
         e = self.episodes_per_worker
@@ -72,12 +79,12 @@ class WorkerRows:
 
     @property
     def shape(self) -> torch.Size:
-        return torch.Size([self._rows_within(self.storage.shape[0]), self.storage.shape[1]])
+        return torch.Size([self.rows_within(self.storage.shape[0]), self.storage.shape[1]])
 
     @property
     def max_size(self) -> int:
         row_length = self.storage.shape[1]
-        return self._rows_within(self.storage.max_size // row_length) * row_length
+        return self.rows_within(self.storage.max_size // row_length) * row_length
 
     def __len__(self) -> int:
         return self.shape.numel()
@@ -232,21 +239,26 @@ class PerWorkerSampler(Sampler):
                 f"PerWorkerSampler draws batch_size // workers from each worker: batch_size={batch_size} must be "
                 f"a multiple of workers={self.workers}"
             )
+        views = self.worker_views(storage)
+        # The last worker owns the fewest of the filled rows: if it has one, every worker has.
+        if views[-1].rows_within(storage.shape[0]) == 0:
+            raise RuntimeError(
+                f"PerWorkerSampler: a worker holds no episodes yet: write {self.episodes_per_worker * self.workers} "
+                f"episodes at a time, {self.episodes_per_worker} per worker"
+            )
         rows, steps, weights = [], [], []
-        for view, sampler in zip(self.worker_views(storage), self.samplers):
-            if len(view) == 0:
-                raise RuntimeError(
-                    f"PerWorkerSampler: worker {view.worker} holds no episodes yet: write "
-                    f"{self.episodes_per_worker * self.workers} episodes at a time, {self.episodes_per_worker} per worker"
-                )
+        for view, sampler in zip(views, self.samplers):
             index, info = sampler.sample(view, batch_size // self.workers)
             local_rows, local_steps = split_index(index)
-            rows.append(view.global_rows(local_rows))
+            rows.append(local_rows)
             steps.append(local_steps)
             if "priority_weight" in info:
                 weights.append(torch.as_tensor(info["priority_weight"]))
         info = {"priority_weight": torch.cat(weights)} if weights else {}
-        return (torch.cat(rows), torch.cat(steps)), info
+        # Every worker's local rows to storage rows in one go.
+        worker = torch.arange(self.workers).repeat_interleave(batch_size // self.workers)
+        global_rows = storage_rows(torch.cat(rows), worker, self.workers, self.episodes_per_worker)
+        return (global_rows, torch.cat(steps)), info
 
     # ---- what the trainer reads ---------------------------------------------------
     @property
