@@ -1,6 +1,7 @@
 """HER relabelling: goals from later next-states of the same episode, rewards recomputed, before the transforms."""
 import copy
 import pickle
+import re
 
 import pytest
 import torch
@@ -181,3 +182,51 @@ def test_her_draws_from_the_buffer_generator_whose_state_the_buffer_state_keeps(
         assert (original.sample() == restored.sample()).all()
     with pytest.raises(TypeError, match="generator"):  # no generator of its own, which the buffer's state would miss
         HindsightRelabel(sparse_reward, generator=torch.Generator())
+
+
+class ReadFailsOnce(EpisodeStorage):
+    """An episode storage whose next batch read fails (a disk error, a Ctrl-C): a draw interrupted after HER's part."""
+
+    fail_next_read = False
+
+    def get(self, index):
+        if self.fail_next_read:
+            self.fail_next_read = False
+            raise OSError("the read of the batch failed")
+        return super().get(index)
+
+
+@pytest.mark.parametrize("drawn_before", [True, False])
+def test_a_draw_interrupted_after_her_leaves_the_next_draws_whole(drawn_before):
+    her = HindsightRelabel(sparse_reward, future_p=1.0)
+    rb = TensorDictReplayBuffer(storage=ReadFailsOnce(10 * T), dim_extend=0, batch_size=512, sample_unit=her,
+                                collate_fn=her.collate)
+    rb.extend(labelled_episodes(4))
+    if drawn_before:
+        rb.sample()
+    rb.storage.fail_next_read = True
+    with pytest.raises(OSError):
+        rb.sample()
+    if not drawn_before:  # no batch has shown yet that the buffer hands its batches to HER
+        with pytest.raises(RuntimeError, match="collate_fn=her.collate.*interrupted"):
+            rb.sample()
+    for _ in range(2):
+        batch = rb.sample()
+        episode, state = decode(batch["desired_goal"])
+        assert torch.equal(episode, decode(batch["achieved_goal"])[0])
+        assert (state > batch["index"][:, 1]).all()
+
+
+@pytest.mark.parametrize("key", ["desired_goal", ("next", "achieved_goal")])
+def test_a_missing_goal_key_is_named(key):
+    episodes = labelled_episodes(2)
+    del episodes[key]
+    her = HindsightRelabel(sparse_reward)
+    rb = make_replay_buffer(None, her, capacity=10 * T)
+    rb.extend(episodes)
+    with pytest.raises(KeyError) as in_the_buffer:
+        rb.sample()
+    with pytest.raises(KeyError) as in_a_relabelling:
+        her.relabel(episodes, torch.tensor([0, 1]), torch.tensor([3, 4]))
+    for error in (in_the_buffer, in_a_relabelling):
+        assert re.search(rf"no key {re.escape(repr(key))}.*present keys", error.value.args[0])

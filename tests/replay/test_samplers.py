@@ -1,5 +1,6 @@
 """Each sampler's episode frequencies and weights against the formulas, computed by hand."""
 import copy
+import re
 from pathlib import Path
 
 import numpy as np
@@ -7,7 +8,7 @@ import pytest
 import torch
 from scipy.stats import chisquare, rankdata
 from tensordict import TensorDict
-from torchrl.data import PrioritizedSampler, TensorDictReplayBuffer
+from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
 from tests.replay.test_buffer import SAMPLERS
@@ -349,3 +350,19 @@ def test_per_and_torchrl_prioritized_sampler_load_each_others_state(how, directi
     drawn, again = saved.sample(), loaded.sample()
     assert torch.equal(drawn["index"], again["index"])
     torch.testing.assert_close(drawn["priority_weight"], again["priority_weight"])
+
+
+@pytest.mark.parametrize("name", sorted(SAMPLERS))
+def test_an_empty_buffer_says_what_torchrl_samplers_say(name):
+    torchrl = TensorDictReplayBuffer(storage=EpisodeStorage(10 * T), sampler=RandomSampler(), dim_extend=0,
+                                     batch_size=4)
+    with pytest.raises(RuntimeError) as theirs:
+        torchrl.sample()
+    rb = make_replay_buffer(SAMPLERS[name](10 * T), HindsightRelabel(sparse_reward), capacity=10 * T, batch_size=4)
+    with pytest.raises(RuntimeError) as ours:
+        rb.sample()
+    assert str(ours.value) == str(theirs.value) == "Cannot sample from an empty storage."
+    rb.extend(make_episodes(2))
+    rb.empty()
+    with pytest.raises(RuntimeError, match=re.escape(str(theirs.value))):
+        rb.sample()

@@ -13,7 +13,7 @@ from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import episode_lengths, next_key
-from torchrl_cebp.replay.samplers.base import split_index
+from torchrl_cebp.replay.samplers.base import require_key, split_index
 from torchrl_cebp.replay.storage import _EpisodeRows
 
 RewardFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
@@ -109,6 +109,7 @@ class HindsightRelabel(SampleUnit):
         self.end_key = end_key
         self.relabelled_key = relabelled_key
         self._pending = threading.local()  # expand() -> collate() of one draw, per sampling thread
+        self._collated = False  # whether a draw has reached collate(): the buffer calls it
 
     def goal_steps(
         self, steps: torch.Tensor, lengths: torch.Tensor | int, generator: torch.Generator | None = None
@@ -145,7 +146,7 @@ class HindsightRelabel(SampleUnit):
         """
         relabel, candidate = self._draw(episodes, rows, steps, generator, lengths)
         flat = torch.add(steps, rows, alpha=episodes.shape[1])
-        stored_goal = episodes.get(self.goal_key).flatten(0, 1).index_select(0, flat)
+        stored_goal = require_key(episodes, self.goal_key, (None,)).flatten(0, 1).index_select(0, flat)
         achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1).index_select(0, flat)
         entries = self._relabelled(relabel, candidate, stored_goal, achieved)
         if self.relabelled_key is not None:
@@ -176,7 +177,7 @@ class HindsightRelabel(SampleUnit):
         relabel = torch.rand(steps.shape, generator=generator) < self.future_p
         goal_steps = self.goal_steps(steps, lengths, generator)
         # A flat view + index_select: much cheaper than 2-D advanced indexing.
-        next_achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1)
+        next_achieved = require_key(episodes, self.next_achieved_goal_key, (None,)).flatten(0, 1)
         return relabel, next_achieved.index_select(0, goal_steps.add_(rows, alpha=episodes.shape[1]))
 
     # ---- the two hooks of a TorchRL buffer -----------------------------------------
@@ -184,12 +185,15 @@ class HindsightRelabel(SampleUnit):
         self, index: torch.Tensor | tuple, info: dict[str, Any], storage: Storage
     ) -> tuple[torch.Tensor | tuple, dict[str, Any]]:
         if getattr(self._pending, "draw", None) is not None:
+            # The buffer read no batch after the previous draw. Once a batch has reached collate(), the buffer is
+            # known to call it, so that draw was interrupted (an error or Ctrl-C while the batch was read): drop it.
             self._pending.draw = None
-            raise RuntimeError(
-                "HindsightRelabel's previous draw was never written into its batch: give the buffer "
-                "the same instance as collate_fn too, e.g. TensorDictReplayBuffer(sample_unit=her, "
-                "collate_fn=her.collate, ...)"
-            )
+            if not self._collated:
+                raise RuntimeError(
+                    "HindsightRelabel's previous draw was never written into its batch: give the buffer the same "
+                    "instance as collate_fn too, e.g. TensorDictReplayBuffer(sample_unit=her, collate_fn=her.collate, "
+                    "...). (If it has it, that first draw was interrupted before its batch was read; sample again.)"
+                )
         rows, steps = split_index(index)
         generator = _upstream.buffer_generator(storage)
         lengths = None
@@ -197,7 +201,9 @@ class HindsightRelabel(SampleUnit):
             lengths = storage.common_length()
             if lengths is None:
                 lengths = storage.valid_lengths(rows)
-        relabel, candidate = self._draw(_upstream.stored_tensordict(storage), rows, steps, generator, lengths)
+        stored = _upstream.stored_tensordict(storage)
+        require_key(stored, self.goal_key, (None,))  # collate() reads it from the batch
+        relabel, candidate = self._draw(stored, rows, steps, generator, lengths)
         if self.relabelled_key is not None:
             info[self.relabelled_key] = relabel
         self._pending.draw = relabel, candidate
@@ -217,6 +223,7 @@ class HindsightRelabel(SampleUnit):
                 "sample_unit too"
             )
         self._pending.draw = None
+        self._collated = True
         relabel, candidate = draw
         for key, value in self._relabelled(
             relabel, candidate, data.get(self.goal_key), data.get(self.next_achieved_goal_key)

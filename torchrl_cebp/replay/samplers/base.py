@@ -24,6 +24,8 @@ from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import common_length, episode_lengths, valid_steps
 
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
+# TorchRL's samplers' words for it, so that code catching theirs catches ours.
+EMPTY_STORAGE_ERROR = "Cannot sample from an empty storage."
 
 
 def require_key(
@@ -39,20 +41,24 @@ def require_key(
         >>> require_key(td, ("next", "touch"), (2,)).shape
         torch.Size([2, 50, 2])
     """
-    expected = "[n_episodes, T, " + ", ".join("*" if d is None else str(d) for d in trailing_shape) + "]"
     value = episodes.get(key, None)
     if value is None:
         raise KeyError(
-            f"episode data has no key {key!r} (expected shape {expected}); "
+            f"episode data has no key {key!r} (expected shape {_shape_text(trailing_shape)}); "
             f"present keys: {sorted(map(str, episodes.keys(True, True)))}"
         )
     if value.ndim != 2 + len(trailing_shape) or any(
         want is not None and got != want for got, want in zip(value.shape[2:], trailing_shape)
     ):
         raise ValueError(
-            f"key {key!r} has shape {list(value.shape)}, expected {expected}"
+            f"key {key!r} has shape {list(value.shape)}, expected {_shape_text(trailing_shape)}"
         )
     return value
+
+
+def _shape_text(trailing_shape: tuple[int | None, ...]) -> str:
+    # Only built for an error: HER checks its keys on every draw.
+    return "[n_episodes, T, " + ", ".join("*" if d is None else str(d) for d in trailing_shape) + "]"
 
 
 def episode_positions(
@@ -254,7 +260,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
         if self._n_stored == 0:
-            raise RuntimeError(f"{type(self).__name__}: cannot sample from an empty buffer")
+            raise RuntimeError(EMPTY_STORAGE_ERROR)
         if self._lengths_unread:
             filled = episode_lengths(storage.get(slice(None)), self.end_key)  # the filled rows only
             self._lengths = torch.full_like(self._lengths, storage.shape[1])
