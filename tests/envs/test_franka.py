@@ -91,7 +91,7 @@ def test_make_env_gives_the_franka_task_as_a_torchrl_env():
 
 
 def grasp_and_lift(env: FrankaPickPlaceEnv, seed: int, height: float) -> tuple[dict, list]:
-    """Hover, descend, close on the cube and lift it ``height``; returns the last observation and the closing steps' touch."""
+    """Hover, descend, close on the cube and lift it ``height``; the last observation and the closing steps' touch."""
     obs, _ = env.reset(seed=seed)
     cube = obs["observation"][3:6].copy()
     obs, _ = drive(env, obs, cube + [0, 0, 0.1], gripper=1.0, steps=8)
