@@ -11,5 +11,12 @@ plot() { "$python" -m torchrl_cebp.plot "$@" 2> >(grep -v AdroitHand >&2); }
 plot "$results" --out "$results/test_success.png" --table 5 10 12 15 --improvement-at 10 12 15
 plot "$results/push-extended-joint-tableblind" --out "$results/push_released_robot.png" \
   --title "Push on robot B, the released code's: joint control, extended goals, table-blind pads"
+# The paper's Fig. 2 on its own setup (robot A: mocap Fetch, standard goals), the panels that have runs so far,
+# with the paper's HER, C-Energy and CPER values (docs/results/paper_fig2.csv, ORIGINAL_CODE.md §6) as markers.
+robot_a=()
+for panel in pick_place-standard push-standard slide-standard; do [ -d "$results/$panel" ] && robot_a+=("$panel"); done
+plot "$results" --panels "${robot_a[@]}" --reference docs/results/paper_fig2.csv --out "$results/robot_a_fig2.png" \
+  --title "The paper's Fig. 2 setup (robot A: mocap Fetch, standard goals); markers: the paper's curves" \
+  --table 5 10 15 20 --improvement-at 5 10 15 20
 plot "$results" --metric priority_ess_fraction --log-y --out "$results/priority_ess_fraction.png"
 plot "$results" --metric is_weight_mean --log-y --out "$results/is_weight_mean.png"

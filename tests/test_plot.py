@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from torchrl_cebp.plot import collect_sweep, draw_sweep, iqm_band, main
+from torchrl_cebp.plot import collect_sweep, draw_sweep, iqm_band, main, summary_table
 
 
 def write_run(folder, success):
@@ -162,3 +162,26 @@ def test_table_probability_of_improvement_at_several_epochs(tmp_path, capsys):
     assert rows["her"][4:6] == ["(baseline)", "(baseline)"]
     with pytest.raises(ValueError, match="epoch counts start at 1"):
         main([str(tmp_path), "--table", "2", "--improvement-at", "0", "2"])
+
+
+def test_panels_pick_and_order_the_tasks_and_published_values_are_marked_in_their_samplers_colour(tmp_path):
+    for task in ("push-standard", "pick_place-standard", "push-extended"):
+        write_run(tmp_path / f"{task}/her/paper/seed0", [0.1, 0.2])
+        write_run(tmp_path / f"{task}/cebp_initial/paper/seed0", [0.0, 0.1])
+    reference = tmp_path / "paper.csv"
+    reference.write_text("panel,sampler,name,epoch,value\n"
+                         "push-standard,her,HER (paper),10,0.5\npush-standard,her,HER (paper),18,0.97\n"
+                         "push-standard,cebp_initial,C-Energy (paper),10,0.8\n")
+    fig = draw_sweep(tmp_path, panels=["push-standard", "pick_place-standard"], reference=reference)
+    push, pick_place = fig.axes
+    assert [push.get_title(), pick_place.get_title()] == ["push-standard (paper)", "pick_place-standard (paper)"]
+    lines = {line.get_label(): line for line in push.get_lines()}
+    assert lines["HER (paper)"].get_xydata().tolist() == [[10, 0.5], [18, 0.97]]
+    assert lines["HER (paper)"].get_color() == lines["her (1 seed)"].get_color()
+    assert lines["C-Energy (paper)"].get_color() == lines["cebp_initial (1 seed)"].get_color()
+    assert lines["HER (paper)"].get_color() != lines["C-Energy (paper)"].get_color()
+    assert not any("paper)" in line.get_label() for line in pick_place.get_lines())
+    with pytest.raises(KeyError, match=r"no runs for panel\(s\) \['slide-standard'\]"):
+        draw_sweep(tmp_path, panels=["slide-standard"])
+    table = summary_table(tmp_path, [2], panels=["push-standard"])
+    assert "push-standard" in table and "pick_place-standard" not in table

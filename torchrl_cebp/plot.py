@@ -6,6 +6,7 @@
     python -m torchrl_cebp.plot runs --table 5 10 --improvement-at 10   # and P(sampler > her) after 10 epochs
     python -m torchrl_cebp.plot runs --table 10 15 --improvement-at 10 15   # P(sampler > her) after 10 and after 15
     python -m torchrl_cebp.plot runs --table 10 --mean-over 6 10   # and each seed's mean over epochs 6-10
+    python -m torchrl_cebp.plot runs --panels pick_place-standard push-standard --reference docs/results/paper_fig2.csv
 
 The statistics follow rliable's conventions (:mod:`torchrl_cebp.stats`): IQM, stratified-bootstrap
 95% confidence intervals, and the probability of improvement over a baseline configuration.
@@ -160,8 +161,48 @@ def seed_count(n: int) -> str:
     return f"{n} seed{'s' * (n > 1)}"
 
 
+REFERENCE_MARKERS = ("X", "*", "D", "P", "s", "^")
+
+
+def select_panels(groups: dict[str, dict], panels: Sequence[str] | None, root: Path) -> dict[str, dict]:
+    """``groups`` restricted to ``panels`` (task folders), in that order; all of them, sorted, for ``None``."""
+    if panels is None:
+        return dict(sorted(groups.items()))
+    missing = [panel for panel in panels if panel not in groups]
+    if missing:
+        raise KeyError(f"no runs for panel(s) {missing} under {root}; its panels: {sorted(groups)}")
+    return {panel: groups[panel] for panel in panels}
+
+
+def read_reference(path: str | Path) -> dict[str, dict[str, list[tuple[int, float]]]]:
+    """Published values to mark on the panels, from a CSV with columns ``panel,sampler,name,epoch,value``.
+
+    ``panel`` is a task folder (e.g. ``push-standard``), ``sampler`` the sampler folder whose colour the
+    markers take, ``name`` the legend's name for the published curve, ``epoch`` the epochs trained.
+    Returns ``{panel: {"<sampler>/<name>": [(epoch, value), ...]}}``.
+
+    Example:
+        >>> import tempfile, pathlib
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     path = pathlib.Path(d) / "paper.csv"
+        ...     _ = path.write_text("panel,sampler,name,epoch,value\\npush-standard,her,HER (paper),10,0.5\\n")
+        ...     read_reference(path)
+        {'push-standard': {'her/HER (paper)': [(10, 0.5)]}}
+    """
+    reference: dict[str, dict[str, list[tuple[int, float]]]] = defaultdict(lambda: defaultdict(list))
+    with Path(path).open(newline="") as f:
+        for row in csv.DictReader(f):
+            reference[row["panel"]][f"{row['sampler']}/{row['name']}"].append((int(row["epoch"]), float(row["value"])))
+    return {panel: dict(curves) for panel, curves in reference.items()}
+
+
 def draw_sweep(
-    root: str | Path, metric: str = "test_success", title: str | None = None, log_y: bool = False
+    root: str | Path,
+    metric: str = "test_success",
+    title: str | None = None,
+    log_y: bool = False,
+    panels: Sequence[str] | None = None,
+    reference: str | Path | None = None,
 ) -> plt.Figure:
     """One panel per task, one IQM line and 95% bootstrap band per configuration.
 
@@ -174,25 +215,35 @@ def draw_sweep(
     which is what a sweep root without a ``<task>-<goal_space>`` level (e.g. ``runs/learning``) needs.
     ``log_y`` draws the metric on a log scale, for one that spans decades (IS weights, the effective
     fraction of the buffer drawn from).
+    ``panels`` keeps those task folders only, in that order. ``reference`` (see :func:`read_reference`)
+    adds published values as markers, in the colour of the sampler they belong to.
     """
     root = Path(root)
     groups = collect_sweep(root, metric)
     if not groups:
         raise FileNotFoundError(f"no {CSV_NAME} under {root}")
+    groups = select_panels(groups, panels, root)
+    published = read_reference(reference) if reference is not None else {}
     panels = {panel: short_labels(panel, sorted(curves_by_label)) for panel, curves_by_label in groups.items()}
     palette = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     configurations = sorted({label for curves_by_label in groups.values() for label in curves_by_label})
     colour = {label: palette[i % len(palette)] for i, label in enumerate(configurations)}
+    sampler_colour = {label.split("/")[0]: c for label, c in colour.items()}
     values = np.concatenate([c for curves_by_label in groups.values() for cs in curves_by_label.values() for c in cs])
     fraction = bool(np.all((values >= 0) & (values <= 1)))
     fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.8), squeeze=False, sharey=fraction)
-    for ax, (panel, curves_by_label) in zip(axes[0], sorted(groups.items())):
+    for ax, (panel, curves_by_label) in zip(axes[0], groups.items()):
         panel_title, short = panels[panel]
         for label, curves in sorted(curves_by_label.items()):
             mean, low, high, seeds = iqm_band(curves)
             epochs = np.arange(1, len(mean) + 1)
             ax.plot(epochs, mean, color=colour[label], label=f"{short[label]} ({seed_coverage(seeds)})")
             ax.fill_between(epochs, low, high, color=colour[label], alpha=0.2)
+        for marker, (key, points) in zip(REFERENCE_MARKERS, sorted(published.get(panel, {}).items())):
+            sampler, _, name = key.partition("/")
+            epochs, values = zip(*points)
+            ax.plot(epochs, values, linestyle="none", marker=marker, markersize=8, markeredgecolor="black",
+                    color=sampler_colour.get(sampler, "grey"), label=name)
         ax.set_title(textwrap.fill(title if title is not None and len(groups) == 1 else panel_title, 50))
         if log_y:
             ax.set_yscale("log")
@@ -214,9 +265,11 @@ def plot_sweep(
     metric: str = "test_success",
     title: str | None = None,
     log_y: bool = False,
+    panels: Sequence[str] | None = None,
+    reference: str | Path | None = None,
 ) -> Path:
     """Draws the sweep (:func:`draw_sweep`) to a PNG, by default ``<root>/<metric>.png``; returns its path."""
-    fig = draw_sweep(root, metric, title, log_y)
+    fig = draw_sweep(root, metric, title, log_y, panels, reference)
     out = Path(out) if out is not None else Path(root) / f"{metric}.png"
     fig.savefig(out, dpi=120)
     plt.close(fig)
@@ -259,6 +312,7 @@ def summary_table(
     mean_over: tuple[int, int] | None = None,
     improvement_at: int | Sequence[int] = (),
     baseline: str = "her",
+    panels: Sequence[str] | None = None,
 ) -> str:
     """A Markdown table: per task and configuration, the IQM [95% bootstrap CI] of ``metric`` after each
     of ``after_epochs`` epochs over the seeds that got there, and the runs' training hours.
@@ -268,7 +322,7 @@ def summary_table(
     while success is still a few test episodes. ``improvement_at=n`` (or several) adds, per ``n``, the
     probability that a configuration's run beats a run of the panel's ``baseline`` configuration (the
     sampler folder of that name, e.g. ``her``; ``-`` in panels without it) after ``n`` epochs, with its
-    95% interval, over the seeds of either that reached epoch ``n``.
+    95% interval, over the seeds of either that reached epoch ``n``. ``panels`` keeps those task folders.
 
     Examples:
         >>> import tempfile
@@ -296,6 +350,7 @@ def summary_table(
     values = collect_sweep(root, metric)
     if not values:
         raise FileNotFoundError(f"no {CSV_NAME} under {root}")
+    values = select_panels(values, panels, root)
     epoch_seconds = collect_sweep(root, "epoch_s")
     header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs)]
     if mean_over is not None:
@@ -307,7 +362,7 @@ def summary_table(
     def at_epoch(curves: list[np.ndarray], n: int) -> list[float]:
         return [curve[n - 1] for curve in curves if len(curve) >= n]
 
-    for panel, curves_by_label in sorted(values.items()):
+    for panel, curves_by_label in values.items():
         title, short = short_labels(panel, sorted(curves_by_label))
         baselines = [curves for label, curves in curves_by_label.items() if label.split("/")[0] == baseline]
         for label, curves in sorted(curves_by_label.items()):
@@ -339,6 +394,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--metric", default="test_success", help="CSV column to plot")
     parser.add_argument("--title", help="figure title (default: each panel is titled with its task folder)")
     parser.add_argument("--log-y", action="store_true", help="a log scale for a metric that spans decades")
+    parser.add_argument("--panels", nargs="+", metavar="TASK_FOLDER", help="draw these task folders only, in this order")
+    parser.add_argument(
+        "--reference", metavar="CSV", help="published values to mark (columns panel,sampler,name,epoch,value)"
+    )
     parser.add_argument(
         "--table", nargs="+", type=int, metavar="N", help="also print a Markdown table of the metric after N epochs"
     )
@@ -355,9 +414,10 @@ def main(argv: list[str] | None = None) -> None:
     for option, value in (("--mean-over", args.mean_over), ("--improvement-at", args.improvement_at)):
         if value and not args.table:
             parser.error(f"{option} adds a column to --table: give --table too")
-    print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title, args.log_y)}")
+    print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title, args.log_y, args.panels, args.reference)}")
     if args.table:
-        print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline))
+        print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline,
+                            args.panels))
 
 
 if __name__ == "__main__":
