@@ -9,7 +9,7 @@ from tests.replay.test_buffer import SAMPLERS
 from tests.replay.test_her import decode, labelled_episodes
 from torchrl_cebp.envs import make_env
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION
-from torchrl_cebp.replay import HindsightRelabel, episode_lengths, make_replay_buffer
+from torchrl_cebp.replay import EpisodeWriter, HindsightRelabel, episode_lengths, make_replay_buffer
 from torchrl_cebp.samplers import (
     CEBPSampler,
     MEPSampler,
@@ -120,13 +120,15 @@ class EndAboveHeight(Transform):
 def test_a_fetch_env_that_ends_early_is_replayed_within_its_episodes():
     env = TransformedEnv(make_env("push", num_envs=8), EndAboveHeight(0.5))
     env.set_seed(0)
-    episodes = env.rollout(T, break_when_any_done=False)  # ended envs auto-reset: the rest of the row is padding
+    torch.manual_seed(0)  # the random actions
+    frames = env.rollout(T, break_when_any_done=False)  # ended envs auto-reset: a lane runs on into its next episode
     env.close()
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(env.base_env.compute_reward, future_p=1.0),
+                            capacity=20 * T, batch_size=4096, writer=EpisodeWriter(T))
+    rb.extend(frames)
+    episodes = rb.storage.get(slice(None))  # the episodes that ended, one a row
     lengths = episode_lengths(episodes)
     assert (lengths < T).any() and (lengths == T).any()
-    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(env.base_env.compute_reward, future_p=1.0),
-                            capacity=20 * T, batch_size=4096)
-    rb.extend(episodes)
     batch = rb.sample()
     rows, steps = batch["index"].unbind(-1)
     assert (steps < lengths[rows]).all()

@@ -3,10 +3,12 @@ from torchrl_cebp.replay.buffer import episode_storage, make_replay_buffer
 from torchrl_cebp.replay.episodes import episode_lengths
 from torchrl_cebp.replay.her import HindsightRelabel
 from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage
+from torchrl_cebp.replay.writer import EpisodeWriter
 
 __all__ = [
     "EpisodeMemmapStorage",
     "EpisodeStorage",
+    "EpisodeWriter",
     "HindsightRelabel",
     "episode_lengths",
     "episode_storage",

@@ -55,7 +55,8 @@ def make_replay_buffer(
 ) -> TensorDictReplayBuffer:
     """A stock :class:`~torchrl.data.TensorDictReplayBuffer` over an episode storage, a sampler (uniform HER by default) and HER.
 
-    ``rb.extend(episodes)`` takes a tensordict of shape ``[n_episodes, T]``;
+    ``rb.extend(episodes)`` takes a tensordict of shape ``[n_episodes, T]`` (any collector batch
+    with ``writer=EpisodeWriter(T)``);
     ``rb.sample()`` returns ``[batch_size]`` transitions with relabelled goals
     and rewards (relabelled before ``transform`` runs), ``"index"`` (``[B, 2]``:
     episode row, step) and, for samplers with importance-sampling weights,

@@ -31,16 +31,52 @@ def episode_lengths(
         >>> episode_lengths(TensorDict({"next": {"done": done}}, [3, 50])).tolist()
         [20, 50, 50]
     """
-    n_rows, row_length = episodes.shape[:2]
-    n = n_rows if rows is None else rows.numel()
+    ends = end_flags(episodes, end_key, rows)
+    if ends is None:
+        n_rows, row_length = episodes.shape[:2]
+        return torch.full((n_rows if rows is None else rows.numel(),), row_length, dtype=torch.long)
+    first_end = ends.to(torch.uint8).argmax(1)
+    return torch.where(ends.any(1), first_end + 1, ends.shape[1])
+
+
+def end_flags(
+    episodes: TensorDictBase, end_key: NestedKey = ("next", "done"), rows: torch.Tensor | None = None
+) -> torch.Tensor | None:
+    """``[n, T]``: whether each step of the rows (of ``rows``, if given) ends an episode; ``None`` without ``end_key``.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> done = torch.zeros(2, 4, 1, dtype=torch.bool)
+        >>> done[0, 1] = True
+        >>> end_flags(TensorDict({"next": {"done": done}}, [2, 4])).int().tolist()
+        [[0, 1, 0, 0], [0, 0, 0, 0]]
+    """
     ends = episodes.get(end_key, None)
     if ends is None:
-        return torch.full((n,), row_length, dtype=torch.long)
+        return None
     if rows is not None:
         ends = ends.index_select(0, rows)
-    ends = ends.reshape(n, row_length, -1).any(-1)
-    first_end = ends.to(torch.uint8).argmax(1)
-    return torch.where(ends.any(1), first_end + 1, row_length)
+    return ends.reshape(*ends.shape[:2], -1).any(-1)
+
+
+def require_time_at(data: TensorDictBase, dim: int) -> None:
+    """Refuses a batch whose ``"time"`` dimension (TorchRL's collectors and ``rollout`` name it) is not ``dim``.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> frames = TensorDict(batch_size=[12, 50], names=[None, "time"])
+        >>> require_time_at(frames, 1)
+        >>> require_time_at(frames.transpose(0, 1), 1)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: the batch of shape [50, 12] has its 'time' dimension at 0, not 1: ...dim_extend=0
+    """
+    names = data.names
+    if "time" in names and names.index("time") != dim:
+        raise ValueError(
+            f"the batch of shape {list(data.shape)} has its 'time' dimension at {names.index('time')}, not {dim}: "
+            "the buffer transposed it (TorchRL's default dim_extend); build it with dim_extend=0"
+        )
 
 
 def valid_steps(lengths: torch.Tensor, row_length: int) -> torch.Tensor:

@@ -10,7 +10,13 @@ from tensordict.utils import NestedKey
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage
 
 from torchrl_cebp import _upstream
-from torchrl_cebp.replay.episodes import common_length, episode_lengths
+from torchrl_cebp.replay.episodes import common_length, end_flags, episode_lengths, require_time_at
+
+# What a write of frames instead of episode rows needs.
+ASSEMBLE_FRAMES = (
+    "a batch of frames (a collector's) needs its episodes assembled, "
+    "e.g. TensorDictReplayBuffer(..., writer=EpisodeWriter(env.max_episode_steps), dim_extend=0)"
+)
 
 
 class _EpisodeRows:
@@ -45,16 +51,7 @@ class _EpisodeRows:
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if isinstance(data, TensorDictBase):
-            if data.ndim < 2:
-                raise ValueError(
-                    "episode storages take whole episodes shaped [n_episodes, T], "
-                    f"got batch shape {list(data.shape)}"
-                )
-            if self.initialized and data.shape[1] != self.shape[1]:
-                raise ValueError(
-                    f"episodes of {data.shape[1]} steps cannot go into a storage of "
-                    f"{self.shape[1]}-step episodes"
-                )
+            self._check_rows(data)
         super().set(cursor, data, set_cursor=set_cursor)
         if isinstance(data, TensorDictBase):
             if self._lengths is None:  # first write, or first since a restore: every row from its flags
@@ -64,6 +61,29 @@ class _EpisodeRows:
                 n_rows = self._lengths.numel()
                 self._lengths[torch.arange(n_rows)[cursor]] = episode_lengths(data, self.end_key)
                 self._common_length = common_length(self._lengths)
+
+    def _check_rows(self, data: TensorDictBase) -> None:
+        """Refuses a write whose rows cannot each be one episode of the storage's length."""
+        if data.ndim != 2:
+            raise ValueError(
+                f"episode storages take whole episodes shaped [n_episodes, T], got batch shape {list(data.shape)}: "
+                f"{ASSEMBLE_FRAMES}"
+            )
+        require_time_at(data, 1)
+        ends = end_flags(data, self.end_key)
+        if ends is not None:
+            counts = ends.sum(-1)
+            crowded = int(counts.argmax())
+            if counts[crowded] > 1:
+                raise ValueError(
+                    f"row {crowded} of the batch of shape {list(data.shape)} holds {int(counts[crowded])} episode "
+                    f"ends ({self.end_key!r} flags), but a row is one episode: {ASSEMBLE_FRAMES}; a batch "
+                    "[envs, T] transposed by the buffer needs dim_extend=0"
+                )
+        if self.initialized and data.shape[1] != self.shape[1]:
+            raise ValueError(
+                f"episodes of {data.shape[1]} steps cannot go into a storage of {self.shape[1]}-step episodes"
+            )
 
     def state_dict(self) -> dict[str, Any]:
         """The storage's state with its filled rows only, so that a checkpoint grows with the stored episodes."""
@@ -135,7 +155,8 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
     """In-memory TorchRL storage of episodes as ``[episode, t]`` rows; ``capacity`` in transitions.
 
     A :class:`~torchrl.data.LazyTensorStorage` with ``ndim=2`` whose writes
-    must be whole episodes of one fixed length; an episode may end before its
+    must be whole episodes of one fixed length (:class:`~torchrl_cebp.replay.EpisodeWriter`
+    assembles them from a collector's frames); an episode may end before its
     row does, at its first ``end_key`` flag (:meth:`valid_lengths`). Its entries are laid out
     transition-major: all entries of one dtype share one ``[rows, T, features]``
     block, and each entry is a view into it. Drawing ``(episode, step)`` pairs
