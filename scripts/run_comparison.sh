@@ -1,13 +1,20 @@
 #!/usr/bin/env bash
-# Issue 17's Push matrix, in its order (most informative first), two runs at a time, one thread each.
-# Every stage is resumable: rerunning this script continues each run after its last finished epoch,
-# and finished runs return at once. Usage: bash scripts/run_comparison.sh [extra Hydra overrides]
+# The open comparison on per-worker replay (issues 27 and 28), in priority order, ONE run at a time: the other
+# core belongs to the Sim2Real training (bash scripts/run_sim2real_training.sh) until its policy ships; run it
+# as JOBS=2 bash scripts/run_comparison.sh once it has. Every stage is resumable: rerunning this script continues each run after
+# its last finished epoch, and finished runs return at once. Commit epochs as they finish with
+# bash scripts/sync_results.sh --every 600. Usage: bash scripts/run_comparison.sh [extra Hydra overrides]
 set -uo pipefail
 cd "$(dirname "$0")/.."
-export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,6p' "$0" | cut -c3-; exit 0; fi
+export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 MUJOCO_GL=osmesa
 python=${PYTHON:-.venv/bin/python}
-stage() { echo "[comparison] $(date -u +%FT%TZ) $*"; "$python" train.py -m "$@" || echo "[comparison] stage failed: $*" >&2; }
-stage +comparison=push_released seed=0,1,2 sampler=her,cebp_released "$@"   # 1. B: her, released CEBP
-stage +comparison=push_standard seed=0,1,2 sampler=cebp_initial "$@"        # 2. A: the Initial commit's CEBP
-stage +comparison=push_standard seed=1,2 sampler=her,cebp "$@"              # 3. A: seeds 1-2 (seed 0: docs/results/learning)
-stage +comparison=push_released seed=0,1,2 sampler=cebp,cper "$@"           # 4. B: the paper's CEBP, CPER
+stage() { echo "[comparison] $(date -u +%FT%TZ) $*"; "$python" train.py -m "hydra.launcher.n_jobs=${JOBS:-1}" "$@" || echo "[comparison] stage failed: $*" >&2; }
+stage +comparison=push_standard seed=0,1,2 sampler=cebp_initial "$@"          # 27.1 A: the figure's CEBP, per worker
+stage +comparison=pick_place_standard seed=0,1,2 sampler=cebp_initial,cper "$@" # 28.1 A PickAndPlace, per worker
+# 28.1 A PickAndPlace HER: started on the merged buffer before per-worker replay landed (uniform HER draws the
+# same distribution either way, tests/replay/test_per_worker.py), so it continues merged, in its own folders.
+stage +comparison=pick_place_standard seed=0,1,2 sampler=her replay.per_worker=false "$@"
+stage +comparison=push_released seed=0,1,2 sampler=cebp_released "$@"         # 27.2 B: the released CEBP, per worker
+stage +comparison=push_standard seed=0,1,2 sampler=cper "$@"                  # 28.2 A Push: CPER
+stage +comparison=push_standard seed=0,1,2 sampler=per,ebp,mep "$@"           # 28.4 A Push: the other baselines
