@@ -14,7 +14,7 @@ plot "$results/push-extended-joint-tableblind" --out "$results/push_released_rob
 # The paper's Fig. 2 on its own setup (robot A: mocap Fetch, standard goals), the panels that have runs so far,
 # with the paper's HER, C-Energy and CPER values (docs/results/paper_fig2.csv, ORIGINAL_CODE.md §6) as markers.
 robot_a=()
-for panel in pick_place-standard push-standard slide-standard; do [ -d "$results/$panel" ] && robot_a+=("$panel"); done
+for panel in pick_place-standard push-standard slide-standard-T70; do [ -d "$results/$panel" ] && robot_a+=("$panel"); done
 plot "$results" --panels "${robot_a[@]}" --reference docs/results/paper_fig2.csv --out "$results/robot_a_fig2.png" \
   --title "The paper's Fig. 2 setup (robot A: mocap Fetch, standard goals); markers: the paper's curves" \
   --table 5 10 15 20 --improvement-at 5 10 15 20

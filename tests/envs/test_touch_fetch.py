@@ -13,7 +13,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.envs import EnvBase, ParallelEnv, SerialEnv
 from torchrl.envs.utils import check_env_specs, step_mdp
 
-from torchrl_cebp.envs import ALL_TASKS, GOAL_SPACES, TASKS, gym_id, make_env, make_touch_fetch
+from torchrl_cebp.envs import ALL_TASKS, GOAL_SPACES, TASKS, gym_id, make_env, make_env_from_config, make_touch_fetch
 
 gym.register_envs(gymnasium_robotics)
 GYMNASIUM_IDS = {"pick_place": "FetchPickAndPlace-v4", "push": "FetchPush-v4", "slide": "FetchSlide-v4"}
@@ -218,3 +218,14 @@ def test_num_envs_partial_reset_leaves_the_other_simulations_running():
     assert not np.array_equal(env._rows[0], before[0])
     assert np.array_equal(env._rows[1], before[1])
     assert env._steps.tolist() == [0, 1]
+
+
+def test_episode_steps_set_a_fetch_tasks_episode_length():
+    env = make_env("slide", "standard", num_envs=2, episode_steps=70)
+    td = env.rollout(100, break_when_any_done=True)
+    assert env.max_episode_steps == 70 and td.shape == (2, 70) and td["next", "truncated"][:, -1].all()
+    assert make_env("slide", "standard").max_episode_steps == 50  # gymnasium's, unless asked
+    config = {"task": "slide", "goal_space": "standard", "episode_steps": 70}
+    assert make_env_from_config(config).max_episode_steps == 70
+    with pytest.raises(ValueError, match="the Franka task's episodes are fixed"):
+        make_env("franka_pick_place", episode_steps=50)

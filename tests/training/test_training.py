@@ -18,7 +18,7 @@ from torchrl_cebp.training import ConfigError, load_checkpoint, load_policy, tra
 from torchrl_cebp.samplers import PerWorkerSampler
 from torchrl_cebp.training.config import check_same_run, env_label, warn_if_bf16_is_emulated
 from torchrl_cebp.training.builders import (
-    TaskDims, derive_seed, make_agent, make_env, make_replay, make_sampler, make_training_collector,
+    TaskDims, derive_seed, episode_steps, make_agent, make_env, make_replay, make_sampler, make_training_collector,
 )
 from torchrl_cebp.training.checkpoint import CHECKPOINT_NAME, POLICY_NAME
 from torchrl_cebp.training.evaluation import evaluate_success_rate
@@ -379,3 +379,13 @@ def test_a_checkpoint_from_before_per_worker_replay_resumes_only_as_merged():
     check_same_run(saved, config("workers=2", "replay.per_worker=false"))
     with pytest.raises(ConfigError, match="per_worker': False.*per_worker': True"):
         check_same_run(saved, config("workers=2"))
+
+
+def test_slide_stage_runs_70_step_episodes_in_its_own_folder_and_the_length_is_checked():
+    cfg = config("+comparison=slide_standard")
+    assert cfg.env.episode_steps == 70 and env_label(cfg.env) == "slide-standard-T70"
+    assert episode_steps(cfg) == 70 and episode_steps(config("env=slide")) == 50
+    with pytest.raises(ConfigError, match="env.episode_steps=1: must be null or an integer above 1"):
+        validate_config(config("env.episode_steps=1"))
+    with pytest.raises(ConfigError, match="env.episode_steps=50: must be null for the Franka task"):
+        validate_config(config("env=franka_pick_place", "env.episode_steps=50"))

@@ -12,7 +12,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from torchrl_cebp.envs.franka import FRANKA_TASK, make_franka
+from torchrl_cebp.envs.franka import FRANKA_TASK, FrankaLayout, make_franka
 from torchrl_cebp.envs.goal_spaces import TASKS
 from torchrl_cebp.envs.joint_control import check_control
 from torchrl_cebp.envs.touch_fetch import make_touch_fetch
@@ -104,11 +104,17 @@ class TouchFetchEnv(EnvBase):
         num_envs: int | None = None,
         render_size: tuple[int, int] | None = None,
         robot: RobotOptions = RobotOptions(),
+        episode_steps: int | None = None,
     ) -> None:
         batch_size = torch.Size([] if num_envs is None else [num_envs])
         super().__init__(device=device, batch_size=batch_size)
-        render = {} if render_size is None else {"render_mode": "rgb_array", "width": render_size[0], "height": render_size[1]}
-        self._sims = [make_goal_env(task, goal_space, robot, **render) for _ in range(max(1, batch_size.numel()))]
+        options = {} if render_size is None else {"render_mode": "rgb_array", "width": render_size[0], "height": render_size[1]}
+        if episode_steps is not None:
+            if task == FRANKA_TASK:
+                raise ValueError(f"episode_steps={episode_steps}: the Franka task's episodes are fixed "
+                                 f"({FrankaLayout().max_episode_steps} steps); it applies to the Fetch tasks {TASKS}")
+            options["max_episode_steps"] = episode_steps
+        self._sims = [make_goal_env(task, goal_space, robot, **options) for _ in range(max(1, batch_size.numel()))]
         first = self._sims[0]
         self.task = task
         self.goal_space = goal_space
@@ -236,11 +242,15 @@ def make_env(
     control: str = "mocap",
     touch_ignores_table: bool = False,
     touch_in_observation: bool = False,
+    episode_steps: int | None = None,
 ) -> EnvBase:
     """The TorchRL env of ``task`` (``pick_place``, ``push``, ``slide``, ``franka_pick_place``) under ``goal_space``.
 
     Fetch tasks have the ``standard`` and ``extended`` goal spaces and both robots (:class:`RobotOptions`:
     ``control``, ``touch_ignores_table``, ``touch_in_observation``); the Franka task only ``standard`` and mocap.
+
+    ``episode_steps`` replaces a Fetch task's episode length (``None``: its goal space's; the Initial commit
+    ran Slide with 70 steps on the standard goals, gymnasium's Slide has 50).
 
     ``num_envs=n`` gives one env of batch size ``[n]`` stepping ``n`` simulations (seeded
     ``seed``, ``seed + 1``, ...); ``render_size=(width, height)`` enables ``env.render()``. Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.
@@ -254,7 +264,8 @@ def make_env(
         torch.Size([8])
     """
     robot = RobotOptions(control, touch_ignores_table, touch_in_observation)
-    env = TouchFetchEnv(task, goal_space, device=device, num_envs=num_envs, render_size=render_size, robot=robot)
+    env = TouchFetchEnv(task, goal_space, device=device, num_envs=num_envs, render_size=render_size, robot=robot,
+                        episode_steps=episode_steps)
     if seed is not None:
         env.set_seed(seed)
     return env
@@ -267,4 +278,5 @@ def make_env_from_config(env: Mapping, **kwargs) -> EnvBase:
         >>> make_env_from_config({"task": "push", "goal_space": "extended", "control": "joint"}).action_spec.shape
         torch.Size([7])
     """
-    return make_env(env["task"], env["goal_space"], **asdict(RobotOptions.from_config(env)), **kwargs)
+    return make_env(env["task"], env["goal_space"], **asdict(RobotOptions.from_config(env)),
+                    episode_steps=env.get("episode_steps"), **kwargs)

@@ -86,6 +86,7 @@ class _TouchFetchMixin(TouchReporting):
         control: str = "mocap",
         touch_ignores_table: bool = False,
         touch_in_observation: bool = False,
+        max_episode_steps: int | None = None,
         **kwargs: Any,
     ) -> None:
         self.goal_space = goal_space
@@ -102,7 +103,8 @@ class _TouchFetchMixin(TouchReporting):
         self.obj_range = self.space.obj_range
         self.target_range = self.space.target_range
         self.distance_threshold = self.space.distance_threshold
-        self.max_episode_steps = self.space.max_episode_steps
+        # The Initial commit registered Slide with 70-step episodes on the standard goals (issue 28).
+        self.max_episode_steps = max_episode_steps or self.space.max_episode_steps
         if self.joint_controller is not None:
             self.action_space = spaces.Box(-1.0, 1.0, shape=(self.joint_controller.n_actions,), dtype=np.float32)
         EzPickle.__init__(
@@ -111,6 +113,7 @@ class _TouchFetchMixin(TouchReporting):
             control=control,
             touch_ignores_table=touch_ignores_table,
             touch_in_observation=touch_in_observation,
+            max_episode_steps=max_episode_steps,
             **kwargs,
         )
 

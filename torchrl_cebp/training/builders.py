@@ -171,6 +171,8 @@ def make_replay(cfg: DictConfig, sampler: Sampler, env: EnvBase) -> tuple[Tensor
 def episode_steps(cfg: DictConfig) -> int | None:
     """Steps per episode of the configured task, without building it (``None`` if the env config is invalid)."""
     task, goal_space = OmegaConf.select(cfg, "env.task"), OmegaConf.select(cfg, "env.goal_space")
+    if OmegaConf.select(cfg, "env.episode_steps") is not None:
+        return cfg.env.episode_steps
     if task == FRANKA_TASK:
         return FrankaLayout().max_episode_steps
     try:

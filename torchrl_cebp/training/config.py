@@ -24,7 +24,8 @@ if not OmegaConf.has_resolver("mul"):
 
 
 def env_label(env: DictConfig) -> str:
-    """The run folder's env part: ``<task>-<goal_space>``, then the robot's label unless it is the default mocap Fetch.
+    """The run folder's env part: ``<task>-<goal_space>``, then the robot's label unless it is the default mocap Fetch,
+    then ``-T<steps>`` when the episode length is set (``env.episode_steps``).
 
     Examples:
         >>> from omegaconf import OmegaConf
@@ -33,9 +34,12 @@ def env_label(env: DictConfig) -> str:
         'push-extended-joint-tableblind'
         >>> env_label(OmegaConf.create({"task": "push", "goal_space": "standard"}))
         'push-standard'
+        >>> env_label(OmegaConf.create({"task": "slide", "goal_space": "standard", "episode_steps": 70}))
+        'slide-standard-T70'
     """
     label = RobotOptions.from_config(env).label
-    return f"{env.task}-{env.goal_space}" + (f"-{label}" if label else "")
+    steps = env.get("episode_steps")
+    return f"{env.task}-{env.goal_space}" + (f"-{label}" if label else "") + (f"-T{steps}" if steps is not None else "")
 
 
 # ``${env_label:${env}}`` names the run folders (conf/config.yaml), so that the robots do not share one.
@@ -122,6 +126,10 @@ def validate_config(cfg: DictConfig) -> None:
     check("resume", lambda v: isinstance(v, bool), "true or false")
     check("overlap_collection", lambda v: isinstance(v, bool), "true or false")
     check("replay.per_worker", lambda v: isinstance(v, bool), "true or false")
+    if OmegaConf.select(cfg, "env.task") == FRANKA_TASK:
+        check("env.episode_steps", lambda v: v is None, "null for the Franka task (its episodes are fixed)")
+    else:
+        check("env.episode_steps", lambda v: v is None or (_is_int(v) and v > 1), "null or an integer above 1")
     check("collector_processes", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
     real_in("replay.future_p", 0.0, 1.0)
     real_in("agent.tau", 0.0, 1.0, open_low=True)
