@@ -1,5 +1,6 @@
 """Each sampler's episode frequencies and weights against the formulas, computed by hand."""
 import copy
+import functools
 import re
 from pathlib import Path
 
@@ -8,11 +9,13 @@ import pytest
 import torch
 from scipy.stats import chisquare, rankdata
 from tensordict import TensorDict
+from torchrl.collectors import MultiSyncCollector
 from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
 from tests.replay.test_buffer import SAMPLERS
-from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, episode_lengths, make_replay_buffer
+from torchrl_cebp.envs import make_env
+from torchrl_cebp.replay import EpisodeStorage, EpisodeWriter, HindsightRelabel, episode_lengths, make_replay_buffer
 from torchrl_cebp.replay.episodes import valid_steps
 from torchrl_cebp.samplers import (
     CEBPSampler,
@@ -366,3 +369,17 @@ def test_an_empty_buffer_says_what_torchrl_samplers_say(name):
     rb.empty()
     with pytest.raises(RuntimeError, match=re.escape(str(theirs.value))):
         rb.sample()
+
+
+def test_an_episode_sampler_refuses_to_go_to_a_collectors_processes():
+    # There it would score the episodes the workers write, and the learner's copy would draw from none of them.
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(20 * T), writer=EpisodeWriter(T),
+                                sampler=UniformEpisodeSampler(), dim_extend=0, batch_size=8)
+    rb.extend(make_env("push", seed=0).rollout(T))  # TorchRL shares only an initialised storage
+    with pytest.raises(RuntimeError, match="keeps its priorities in this process.*EpisodeWriter"):
+        collector = MultiSyncCollector([functools.partial(make_env, "push", seed=1)], None, frames_per_batch=100,
+                                       total_frames=100, replay_buffer=rb, auto_register_policy_transforms=False)
+        try:
+            next(iter(collector))
+        finally:
+            collector.shutdown()

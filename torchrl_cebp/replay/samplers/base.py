@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import json
+from multiprocessing.context import get_spawning_popen
 from pathlib import Path
 from typing import Any
 
@@ -300,6 +301,15 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._tree = SumSegmentTreeFp64(self._priorities.numel())
         if self._priorities.numel():
             self._tree[torch.arange(self._priorities.numel())] = self._priorities
+
+    def __getstate__(self) -> dict[str, Any]:
+        if get_spawning_popen() is not None:  # pickled for a new process, as TorchRL's PrioritizedSampler checks
+            raise RuntimeError(
+                f"{type(self).__name__} keeps its priorities in this process: in another one (a buffer handed to "
+                "MultiSyncCollector(replay_buffer=...)) it would score episodes this process never draws. Extend the "
+                "buffer here with the collector's batches (writer=EpisodeWriter(T) assembles their episodes)."
+            )
+        return super().__getstate__()
 
     def _empty(self) -> None:
         self._priorities.zero_()
