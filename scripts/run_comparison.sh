@@ -17,4 +17,5 @@ stage +comparison=pick_place_standard seed=0,1,2 sampler=cebp_initial,cper "$@" 
 stage +comparison=pick_place_standard seed=0,1,2 sampler=her replay.per_worker=false "$@"
 stage +comparison=push_released seed=0,1,2 sampler=cebp_released "$@"         # 27.2 B: the released CEBP, per worker
 stage +comparison=push_standard seed=0,1,2 sampler=cper "$@"                  # 28.2 A Push: CPER
+stage +comparison=slide_standard seed=0,1,2 sampler=her,cebp_initial "$@"     # 28.3 A Slide, 70-step episodes
 stage +comparison=push_standard seed=0,1,2 sampler=per,ebp,mep "$@"           # 28.4 A Push: the other baselines
