@@ -21,8 +21,8 @@ one while the env process collects, both once it is done.
     .venv/bin/python benchmarks/training.py --workers 8 --cycles 10 --sampler cebp_initial \
         --methods ours_merged:1 ours:1 --repeats 3        # per-worker against merged replay, interleaved
 
-With ``--repeats N`` every method runs N times, the methods interleaved, and each reports its median
-(on shared cores this keeps a slow stretch from landing on one method only).
+With ``--repeats N`` every method runs N times, the methods interleaved in alternating order (A B, B A, ...),
+and each reports its median: on shared cores a slow stretch, or a load that drifts, then lands on no method alone.
 """
 
 from __future__ import annotations
@@ -250,7 +250,8 @@ def main() -> None:
         require_stable_baselines3()
     runs: dict[str, list[Timing]] = {}
     for repeat in range(args.repeats):
-        for method in args.methods:
+        # Every other repeat in reverse (A B B A ...): a load that drifts over the runs then favours no method.
+        for method in args.methods if repeat % 2 == 0 else reversed(args.methods):
             name, _, threads = method.partition(":")
             if name not in runners:
                 parser.error(f"unknown method {name!r}: choose from {', '.join(runners)}")
