@@ -98,9 +98,12 @@ def sampling_spread(sampler: Sampler) -> dict[str, float]:
 
 def beta_annealing(sampler: Sampler) -> LinearScheduler | None:
     """PER's linear beta schedule over its draws (every worker's at once), or ``None`` for other samplers."""
+    if isinstance(sampler, PERSampler):
+        return sampler.beta_scheduler()
     per = _shard(sampler)
     if not isinstance(per, PERSampler):
         return None
+    # One schedule sets every worker's beta (PerWorkerSampler.beta); the checkpoint keeps its step count.
     return LinearScheduler(sampler, "beta", final_value=per.beta_end, num_steps=per.beta_anneal_draws)
 
 
