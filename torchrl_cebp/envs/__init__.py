@@ -11,6 +11,7 @@ from torchrl_cebp.envs.franka import register as register_franka
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, TASKS
 from torchrl_cebp.envs.joint_control import CONTROLS
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION, ObservationLayout
+from torchrl_cebp.envs.reward import compute_reward_of
 from torchrl_cebp.envs.torchrl_env import ALL_TASKS, RobotOptions, TouchFetchEnv, make_env, make_env_from_config, make_goal_env
 from torchrl_cebp.envs.touch_fetch import gym_id, make_touch_fetch, register
 
@@ -28,6 +29,7 @@ __all__ = [
     "ObservationLayout",
     "RobotOptions",
     "TouchFetchEnv",
+    "compute_reward_of",
     "gym_id",
     "make_env",
     "make_env_from_config",
