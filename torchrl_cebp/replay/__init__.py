@@ -3,6 +3,7 @@ from torchrl_cebp.replay.buffer import episode_storage, make_replay_buffer
 from torchrl_cebp.replay.episodes import episode_lengths
 from torchrl_cebp.replay.her import HindsightRelabel
 from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage
+from torchrl_cebp.replay.transforms import replay_cat_tensors
 from torchrl_cebp.replay.writer import EpisodeWriter
 
 __all__ = [
@@ -13,4 +14,5 @@ __all__ = [
     "episode_lengths",
     "episode_storage",
     "make_replay_buffer",
+    "replay_cat_tensors",
 ]
