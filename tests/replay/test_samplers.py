@@ -383,3 +383,42 @@ def test_an_episode_sampler_refuses_to_go_to_a_collectors_processes():
             next(iter(collector))
         finally:
             collector.shutdown()
+
+
+EPISODE_SAMPLERS = sorted(name for name in SAMPLERS if name != "per")  # PER's priorities are TD errors, fed back
+
+
+@pytest.mark.parametrize("first", ["sample", "extend"])
+@pytest.mark.parametrize("name", EPISODE_SAMPLERS)
+def test_a_new_sampler_scores_the_episodes_its_storage_already_holds(name, first):
+    seen, data = buffer(SAMPLERS[name](50 * T))  # saw every write
+    new = TensorDictReplayBuffer(storage=seen.storage, sampler=SAMPLERS[name](50 * T), dim_extend=0, batch_size=64)
+    if first == "extend":
+        more = hand_made(2, seed=1)
+        seen.extend(more)  # the shared storage: the new sampler is told of this write only
+        new.sampler.mark_update(torch.arange(N_EPISODES, N_EPISODES + 2), storage=new.storage)
+    new.sample()
+    assert new.sampler.n_episodes == seen.sampler.n_episodes
+    for key in ("priorities", "lengths"):
+        torch.testing.assert_close(new.sampler.state_dict()[key], seen.sampler.state_dict()[key])
+
+
+def _extend_in_a_forked_process(rb, errors):
+    try:
+        rb.extend(hand_made(2, seed=1))
+    except RuntimeError as error:
+        errors.put(str(error))
+    else:
+        errors.put(None)
+
+
+def test_a_forked_copy_of_an_episode_sampler_refuses_to_score_its_writes():
+    # Its priorities would stay in the child: the parent's sampler would draw on, silently, from its own episodes only.
+    rb, _ = buffer(CEBPSampler())
+    context = torch.multiprocessing.get_context("fork")
+    errors = context.Queue()
+    child = context.Process(target=_extend_in_a_forked_process, args=(rb, errors))
+    child.start()
+    message = errors.get(timeout=60)
+    child.join(timeout=60)
+    assert message is not None and re.search(r"keeps its priorities in process \d+, which draws.*EpisodeWriter", message)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import json
+import os
 from multiprocessing.context import get_spawning_popen
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,11 @@ from torchrl_cebp.replay.episodes import common_length, episode_lengths, valid_s
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
 # TorchRL's samplers' words for it, so that code catching theirs catches ours.
 EMPTY_STORAGE_ERROR = "Cannot sample from an empty storage."
+# Why a sampler refuses to score episodes in another process than the one that draws: the supported way instead.
+EXTEND_IN_THE_LEARNER = (
+    "it would score episodes this process never draws. Extend the buffer in the process that samples it, with the "
+    "collector's batches (writer=EpisodeWriter(T) assembles their episodes)."
+)
 
 
 def require_key(
@@ -103,7 +109,11 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     :class:`~torchrl.data.TensorDictReplayBuffer` over
     ``LazyTensorStorage(capacity_in_transitions, ndim=2)``: the buffer's
     writer notifies the sampler through :meth:`mark_update` after each write,
-    which is when the priority of each written episode is computed.
+    which is when the priority of each written episode is computed. A sampler
+    given a storage that already holds episodes scores them all when it first
+    meets it. Priorities live in the process that draws: a copy of the sampler
+    in another process (a forked worker, a collector's ``replay_buffer=``)
+    refuses to score the episodes written there, with the supported way.
 
     Args:
         end_key (NestedKey): the flag that ends an episode before its row does.
@@ -137,6 +147,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._cumulative_step_weights: torch.Tensor | None = None
         self._tree: SumSegmentTreeFp64 | None = None
         self._n_stored = 0
+        self._owner_pid = os.getpid()
 
     # ---- what subclasses define -------------------------------------------------
     @abc.abstractmethod
@@ -186,12 +197,20 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 f"{type(self).__name__} computes priorities from the written episodes and "
                 "needs the storage: use it inside a replay buffer whose writer notifies it."
             )
+        if os.getpid() != self._owner_pid:  # a forked copy: the writes of this process would go unseen by the owner
+            raise RuntimeError(
+                f"{type(self).__name__} keeps its priorities in process {self._owner_pid}, which draws; scoring "
+                f"episodes in process {os.getpid()}, {EXTEND_IN_THE_LEARNER}"
+            )
+        # On first meeting a storage, the rows it held before count as written now.
+        self._score_rows(stored_rows(index) if self._tree is not None else torch.arange(storage.shape[0]), storage)
+
+    def _score_rows(self, rows: torch.Tensor, storage: Storage) -> None:
         if getattr(storage, "ndim", 1) != 2:
             raise ValueError(
                 f"{type(self).__name__} needs an episode storage with ndim=2 "
                 f"(rows = episodes, columns = steps), got ndim={getattr(storage, 'ndim', 1)}"
             )
-        rows = stored_rows(index)
         first, last = int(rows[0]), int(rows[-1])
         # A write is usually one run of consecutive rows: read it as a view, not a copy.
         episodes = storage.get(slice(first, last + 1)) if last - first + 1 == rows.numel() else storage.get(rows)
@@ -260,6 +279,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         return self._priorities[rows] / self._tree.query(0, self._tree.size)
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
+        if self._tree is None and len(storage):  # a new sampler over a storage that holds episodes
+            self._score_rows(torch.arange(storage.shape[0]), storage)
         if self._n_stored == 0:
             raise RuntimeError(EMPTY_STORAGE_ERROR)
         if self._lengths_unread:
@@ -306,10 +327,13 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         if get_spawning_popen() is not None:  # pickled for a new process, as TorchRL's PrioritizedSampler checks
             raise RuntimeError(
                 f"{type(self).__name__} keeps its priorities in this process: in another one (a buffer handed to "
-                "MultiSyncCollector(replay_buffer=...)) it would score episodes this process never draws. Extend the "
-                "buffer here with the collector's batches (writer=EpisodeWriter(T) assembles their episodes)."
+                f"MultiSyncCollector(replay_buffer=...), or to a spawned process), {EXTEND_IN_THE_LEARNER}"
             )
         return super().__getstate__()
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # A copy (deepcopy, or unpickled elsewhere) belongs to the process that made it.
+        self.__dict__.update(state, _owner_pid=os.getpid())
 
     def _empty(self) -> None:
         self._priorities.zero_()
