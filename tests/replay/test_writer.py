@@ -1,15 +1,19 @@
 """EpisodeWriter: a collector's frames, in any layout, become whole episode rows; rows that cannot be episodes are refused."""
+import functools
+import itertools
+
 import pytest
 import torch
 from tensordict import TensorDict
-from torchrl.collectors import Collector
+from torchrl.collectors import Collector, MultiAsyncCollector, MultiSyncCollector
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs import TransformedEnv
 
-from tests.replay.conftest import T, make_episodes
+from tests.replay.conftest import T, make_episodes, sparse_reward
 from tests.replay.test_episodes import EndAboveHeight
 from torchrl_cebp.envs import make_env
-from torchrl_cebp.replay import EpisodeStorage, EpisodeWriter, episode_lengths
+from torchrl_cebp.replay import EpisodeStorage, EpisodeWriter, HindsightRelabel, episode_lengths, make_replay_buffer
+from torchrl_cebp.samplers import CEBPSampler
 
 TRAJECTORY = ("collector", "traj_ids")
 
@@ -65,6 +69,28 @@ def test_collector_frames_become_whole_episodes_across_batches(num_envs, frames_
     assert rb.storage.shape[1] == T and len(rb) == T * (frames_per_batch * batches // T)
     assert_whole_episodes(rb)
     assert_each_trajectory_stored_whole(rb, batches_)
+
+
+@pytest.mark.parametrize("collector_class", [MultiSyncCollector, MultiAsyncCollector])
+def test_env_processes_fill_one_prioritised_buffer_that_the_learner_extends(collector_class):
+    # The supported way to collect in other processes: they yield frames, and the process that draws extends the
+    # buffer, so that its sampler scores every episode. Their episodes run across batches and interleave.
+    collector = collector_class([functools.partial(make_env, "push", seed=seed) for seed in (0, 1)], None,
+                                frames_per_batch=2 * 30, total_frames=-1, auto_register_policy_transforms=False)
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward, future_p=1.0), capacity=40 * T,
+                            batch_size=64, writer=EpisodeWriter(T))
+    batches = []
+    try:
+        for batch in itertools.islice(collector, 6):
+            rb.extend(batch)
+            batches.append(batch.clone())  # the collector may write its next batch into the same memory
+    finally:
+        collector.shutdown()
+    assert rb.storage.shape[0] >= 2 and rb.sampler.n_episodes == rb.storage.shape[0]
+    assert_whole_episodes(rb)
+    assert_each_trajectory_stored_whole(rb, batches)
+    drawn = rb.sample()
+    assert drawn["priority_weight"].shape == (64,) and set(drawn["next", "reward"].unique().tolist()) <= {-1.0, 0.0}
 
 
 def test_episodes_that_end_early_in_collector_batches():
