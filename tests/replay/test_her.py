@@ -91,6 +91,25 @@ def test_final_and_episode_strategies(strategy):
         assert state.min() == 1 and state.max() == T
 
 
+def test_past_strategy_replays_an_earlier_transition_towards_the_drawn_steps_goal():
+    """CPER's published draw: the drawn step t gives the goal (state t + 1); the transition is t' = floor(U t)."""
+    her = HindsightRelabel(sparse_reward, future_p=1.0, strategy="past")
+    rb = make_replay_buffer(None, her, capacity=10 * T, batch_size=4096, generator=torch.Generator().manual_seed(0))
+    rb.extend(labelled_episodes(4))
+    batch = rb.sample()
+    episode, goal_state = decode(batch["desired_goal"])
+    transition_episode, transition_state = decode(batch["achieved_goal"])
+    assert torch.equal(episode, transition_episode) and torch.equal(batch["index"][:, 1], transition_state)
+    drawn = goal_state - 1  # the uniform sampler's step
+    assert drawn.min() == 0 and drawn.max() == T - 1
+    assert (transition_state <= drawn).all() and (transition_state < drawn)[drawn > 0].all()
+    assert 0.23 < (transition_state.float() / T).mean() < 0.27  # E[floor(U t)] for t uniform on [0, T): about T / 4
+    unrelabelled = make_replay_buffer(None, HindsightRelabel(sparse_reward, future_p=0.0, strategy="past"),
+                                      capacity=10 * T, batch_size=4096)
+    unrelabelled.extend(labelled_episodes(4))
+    assert (unrelabelled.sample()["index"][:, 1].float() / T).mean() < 0.3  # its transitions too come early
+
+
 def test_bad_strategy_and_probability_are_named():
     with pytest.raises(ValueError, match="'futur'.*future"):
         HindsightRelabel(sparse_reward, strategy="futur")

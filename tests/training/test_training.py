@@ -366,7 +366,7 @@ def test_code_version_is_the_commit_the_process_loaded(monkeypatch):
 def test_every_row_names_the_replay_layout_that_ran(tmp_path, workers, per_worker, layout):
     cfg = config("sampler=cebp_initial", "epochs=1", f"workers={workers}", f"replay.per_worker={per_worker}")
     log = rows(train(cfg, tmp_path))
-    assert log[0]["replay"] == layout
+    assert log[0]["replay"] == layout and log[0]["her_strategy"] == "future"
     sampler = make_sampler(cfg)
     assert isinstance(sampler, PerWorkerSampler) == (layout == "per_worker")
     if layout == "per_worker":

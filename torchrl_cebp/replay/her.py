@@ -17,7 +17,7 @@ from torchrl_cebp.replay.samplers.base import require_key, split_index
 from torchrl_cebp.replay.storage import _EpisodeRows
 
 RewardFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
-STRATEGIES = ("future", "final", "episode")
+STRATEGIES = ("future", "final", "episode", "past")
 
 
 class HindsightRelabel(SampleUnit):
@@ -36,7 +36,10 @@ class HindsightRelabel(SampleUnit):
     * ``"future"``: state ``t' = t + 1 + floor(U * (L - t))``, a *later* next-state, never the
       current state, possibly the final one (baselines' HER);
     * ``"final"``: the episode's final state;
-    * ``"episode"``: any next-state of the episode, uniformly.
+    * ``"episode"``: any next-state of the episode, uniformly;
+    * ``"past"``: CPER's published draw (its ``her.py``): the drawn step ``t`` gives the goal, next-state
+      ``t + 1``, and the transition replayed is an earlier one, ``t' = floor(U * t)``, relabelled or not.
+      With a sampler that weighs steps (CPER's contact weights) the weights thus pick goals, not transitions.
 
     ``L`` is the episode's valid length: the step after its first ``end_key`` (``("next", "done")``)
     flag, or the row length without one. No goal comes from beyond it.
@@ -50,7 +53,7 @@ class HindsightRelabel(SampleUnit):
         reward_fn: vectorised sparse reward, ``[..., 3], [..., 3] -> [..., 1]`` (e.g. the env's
             ``compute_reward``).
         future_p: probability to relabel a transition (0.8 is HER's replay_k=4).
-        strategy: ``"future"``, ``"final"`` or ``"episode"``.
+        strategy: ``"future"``, ``"final"``, ``"episode"`` or ``"past"``.
         goal_key, achieved_goal_key: keys of the goals at the root; their ``"next"`` counterparts
             hold the next-states' goals.
         reward_key: where the recomputed reward goes.
@@ -88,7 +91,7 @@ class HindsightRelabel(SampleUnit):
         reward_fn: RewardFn,
         *,
         future_p: float = 0.8,
-        strategy: Literal["future", "final", "episode"] = "future",
+        strategy: Literal["future", "final", "episode", "past"] = "future",
         goal_key: NestedKey = "desired_goal",
         achieved_goal_key: NestedKey = "achieved_goal",
         reward_key: NestedKey = ("next", "reward"),
@@ -120,6 +123,8 @@ class HindsightRelabel(SampleUnit):
         ``lengths`` are the episodes' valid lengths, or one length they all share.
         """
         last = lengths - 1
+        if self.strategy == "past":
+            return _at_most(steps.clone(), last)
         if self.strategy == "final":
             return torch.full_like(steps, last) if isinstance(last, int) else last.clone()
         uniform = torch.rand(steps.shape, generator=generator)
@@ -207,6 +212,9 @@ class HindsightRelabel(SampleUnit):
         if self.relabelled_key is not None:
             info[self.relabelled_key] = relabel
         self._pending.draw = relabel, candidate
+        if self.strategy == "past":  # the transition replayed precedes the drawn step, which gave the goal
+            earlier = torch.rand(steps.shape, generator=generator, dtype=torch.float64).mul_(steps).long()
+            index = (rows, earlier) if isinstance(index, tuple) else torch.stack([rows, earlier], -1)
         return index, info
 
     def collate(self, data: TensorDictBase) -> TensorDictBase:

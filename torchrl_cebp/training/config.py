@@ -47,16 +47,17 @@ if not OmegaConf.has_resolver("env_label"):
     OmegaConf.register_new_resolver("env_label", env_label)
 
 
-def replay_label(workers: int, per_worker: bool) -> str:
-    """The run folder's suffix after the preset: ``-per_worker`` for per-worker replay of several workers, else none.
+def replay_label(workers: int, per_worker: bool, strategy: str = "future") -> str:
+    """The run folder's suffix after the preset: ``-per_worker`` for per-worker replay of several workers, then
+    ``-her_<strategy>`` for a HER strategy other than baselines' ``future``.
 
-    Runs of the merged buffer keep the folders they had before per-worker replay existed.
+    Runs of the merged buffer and of ``future`` keep the folders they had before these options existed.
 
     Examples:
-        >>> replay_label(8, True), replay_label(8, False), replay_label(1, True)
-        ('-per_worker', '', '')
+        >>> replay_label(8, True), replay_label(8, False), replay_label(1, True), replay_label(8, True, "past")
+        ('-per_worker', '', '', '-per_worker-her_past')
     """
-    return "-per_worker" if workers > 1 and per_worker else ""
+    return ("-per_worker" if workers > 1 and per_worker else "") + (f"-her_{strategy}" if strategy != "future" else "")
 
 
 if not OmegaConf.has_resolver("replay_label"):

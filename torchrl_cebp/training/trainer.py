@@ -224,7 +224,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     if resuming:  # after every part is built: building one may draw from the restored random streams
         state = load_checkpoint(run_dir, map_location=device)
         start_epoch, wall_before = restore_training_state(state, cfg, agent, optimizer, replay, learner.beta_scheduler)
-    log = EpochLog(run_dir, start_epoch, cfg.logger, labels={"replay": replay_layout(cfg)})
+    log = EpochLog(run_dir, start_epoch, cfg.logger, labels={"replay": replay_layout(cfg), "her_strategy": cfg.replay.strategy})
     run_start = time.perf_counter()
 
     progress = tqdm(range(start_epoch, cfg.epochs), initial=start_epoch, total=cfg.epochs, desc="epochs")
