@@ -9,8 +9,8 @@ import pytest
 import torch
 from scipy.stats import chisquare, rankdata
 from tensordict import TensorDict
-from torchrl.collectors import MultiSyncCollector
-from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
+from torchrl.collectors import MultiAsyncCollector, MultiSyncCollector
+from torchrl.data import LazyTensorStorage, PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
 from tests.replay.test_buffer import SAMPLERS
@@ -371,18 +371,26 @@ def test_an_empty_buffer_says_what_torchrl_samplers_say(name):
         rb.sample()
 
 
-def test_an_episode_sampler_refuses_to_go_to_a_collectors_processes():
-    # There it would score the episodes the workers write, and the learner's copy would draw from none of them.
-    rb = TensorDictReplayBuffer(storage=EpisodeStorage(20 * T), writer=EpisodeWriter(T),
-                                sampler=UniformEpisodeSampler(), dim_extend=0, batch_size=8)
+@pytest.mark.parametrize("collector_class", [MultiSyncCollector, MultiAsyncCollector])
+def test_an_episode_sampler_scores_what_a_collectors_processes_write(collector_class):
+    # The workers get copies of the buffer: the episodes they write reach the learner's sampler through the storage.
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=4 * T, batch_size=64,
+                            writer=EpisodeWriter(T))
     rb.extend(make_env("push", seed=0).rollout(T))  # TorchRL shares only an initialised storage
-    with pytest.raises(RuntimeError, match="keeps its priorities in this process.*EpisodeWriter"):
-        collector = MultiSyncCollector([functools.partial(make_env, "push", seed=1)], None, frames_per_batch=100,
-                                       total_frames=100, replay_buffer=rb, auto_register_policy_transforms=False)
-        try:
-            next(iter(collector))
-        finally:
-            collector.shutdown()
+    collector = collector_class([functools.partial(make_env, "push", seed=seed) for seed in (1, 2)], None,
+                                frames_per_batch=2 * 60, total_frames=2 * 4 * 60, replay_buffer=rb,
+                                auto_register_policy_transforms=False)
+    try:
+        for _ in collector:  # 240 frames per worker: four episodes each, written over 1 + 8 rows of 4
+            pass
+    finally:
+        collector.shutdown()
+    drawn = rb.sample()
+    assert rb.write_count == 9 and rb.sampler.n_episodes == 4
+    new = TensorDictReplayBuffer(storage=rb.storage, sampler=CEBPSampler(), dim_extend=0, batch_size=64)
+    new.sample()  # scores the rows as they are now
+    torch.testing.assert_close(rb.sampler.state_dict()["priorities"], new.sampler.state_dict()["priorities"])
+    assert set(drawn["next", "reward"].unique().tolist()) <= {-1.0, 0.0}
 
 
 EPISODE_SAMPLERS = sorted(name for name in SAMPLERS if name != "per")  # PER's priorities are TD errors, fed back
@@ -403,7 +411,7 @@ def test_a_new_sampler_scores_the_episodes_its_storage_already_holds(name, first
         torch.testing.assert_close(new.sampler.state_dict()[key], seen.sampler.state_dict()[key])
 
 
-def _extend_in_a_forked_process(rb, errors):
+def _extend_reporting_errors(rb, errors):
     try:
         rb.extend(hand_made(2, seed=1))
     except RuntimeError as error:
@@ -412,13 +420,47 @@ def _extend_in_a_forked_process(rb, errors):
         errors.put(None)
 
 
-def test_a_forked_copy_of_an_episode_sampler_refuses_to_score_its_writes():
+@pytest.mark.parametrize("start, storage", [("fork", EpisodeStorage),
+                                            ("spawn", functools.partial(LazyTensorStorage, ndim=2))],
+                         ids=["a forked copy", "a storage without row counts"])
+def test_a_sampler_that_cannot_learn_of_another_processs_writes_refuses_them(start, storage):
     # Its priorities would stay in the child: the parent's sampler would draw on, silently, from its own episodes only.
-    rb, _ = buffer(CEBPSampler())
-    context = torch.multiprocessing.get_context("fork")
+    rb = TensorDictReplayBuffer(storage=storage(50 * T), sampler=CEBPSampler(), dim_extend=0, batch_size=64)
+    rb.extend(hand_made(N_EPISODES))
+    context = torch.multiprocessing.get_context(start)
     errors = context.Queue()
-    child = context.Process(target=_extend_in_a_forked_process, args=(rb, errors))
+    child = context.Process(target=_extend_reporting_errors, args=(rb, errors))
     child.start()
-    message = errors.get(timeout=60)
+    message = errors.get(timeout=120)
     child.join(timeout=60)
-    assert message is not None and re.search(r"keeps its priorities in process \d+, which draws.*EpisodeWriter", message)
+    assert message is not None and re.search(r"keeps its priorities in process \d+, which draws.*EpisodeWriter",
+                                             message)
+
+
+def _write_episodes_that_end_early(rb, lengths):
+    episodes = hand_made(len(lengths), seed=3)
+    episodes["next", "done"][:] = False
+    for episode, length in enumerate(lengths):
+        episodes["next", "done"][episode, length - 1] = True
+    rb.extend(episodes)
+
+
+def test_episodes_a_spawned_process_writes_are_scored_and_drawn_within_their_length():
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=4 * T, batch_size=4096,
+                            shared=True)
+    rb.extend(hand_made(4))  # every row full: episodes of one length, the storage says
+    assert rb.storage.common_length() == T
+    child = torch.multiprocessing.get_context("spawn").Process(target=_write_episodes_that_end_early,
+                                                               args=(rb, [10, 20]))
+    child.start()
+    child.join(timeout=120)
+    assert child.exitcode == 0
+    drawn = rb.sample()  # rows 0 and 1 overwritten
+    lengths = torch.tensor([10, 20, T, T])
+    assert torch.equal(rb.storage.valid_lengths(torch.arange(4)), lengths) and rb.storage.common_length() is None
+    rows, steps = drawn["index"].unbind(-1)
+    assert set(rows.tolist()) == set(range(4)) and bool((steps < lengths[rows]).all())
+    new = TensorDictReplayBuffer(storage=rb.storage, sampler=CEBPSampler(), dim_extend=0, batch_size=64)
+    new.sample()
+    for key in ("priorities", "lengths"):
+        torch.testing.assert_close(rb.sampler.state_dict()[key], new.sampler.state_dict()[key])

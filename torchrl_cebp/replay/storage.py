@@ -19,16 +19,79 @@ ASSEMBLE_FRAMES = (
 )
 
 
+class RowWrites:
+    """How many times each row of an episode storage was written, in memory every process holding the storage shares.
+
+    Sent to another process with the storage (a spawned process, a collector's ``replay_buffer=``),
+    the counts are shared memory (as torch shares every CPU tensor it sends): a process that keeps
+    something computed from the rows (a sampler's priorities, the storage's own episode lengths)
+    holds a :meth:`watch` and learns from it which rows another process wrote.
+
+    Examples:
+        >>> writes = RowWrites(4)
+        >>> watch = writes.watch()
+        >>> writes.record(torch.tensor([1, 2]))
+        >>> watch.new_rows().tolist(), watch.new_rows().tolist()
+        ([1, 2], [])
+    """
+
+    def __init__(self, n_rows: int) -> None:
+        self.per_row = torch.zeros(n_rows, dtype=torch.long)
+        self.total = torch.zeros((), dtype=torch.long)
+
+    def record(self, rows: torch.Tensor) -> None:
+        """Counts a write of ``rows``, after their data is in place (a reader that sees the count sees the data)."""
+        self.per_row.index_add_(0, rows, torch.ones_like(rows))
+        self.total += 1
+
+    def watch(self) -> RowWriteWatch:
+        """A reader's view of the counts, seeing every write until now."""
+        return RowWriteWatch(self)
+
+
+class RowWriteWatch:
+    """What one process has seen of a :class:`RowWrites`: :meth:`new_rows` are those written since.
+
+    Costs one read of a shared number when nothing was written, O(rows) when something was.
+    """
+
+    def __init__(self, writes: RowWrites) -> None:
+        self.writes = writes
+        self._seen = writes.per_row.clone()
+        self._seen_total = int(writes.total)
+
+    def saw(self, rows: torch.Tensor) -> None:
+        """Marks the writes of ``rows`` as seen: the watching process wrote them itself."""
+        self._seen[rows] = self.writes.per_row[rows]
+
+    def new_rows(self) -> torch.Tensor:
+        """The rows written since the last call (or :meth:`saw`) that this process has not seen."""
+        total = int(self.writes.total)
+        if total == self._seen_total:
+            return torch.zeros(0, dtype=torch.long)
+        now = self.writes.per_row.clone()
+        rows = (now != self._seen).nonzero().squeeze(-1)
+        self._seen, self._seen_total = now, total
+        return rows
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # Torch sends the seen counts as shared memory too; each process keeps its own.
+        self.__dict__.update(state, _seen=state["_seen"].clone())
+
+
 class _EpisodeRows:
     """Writes must be whole episodes of one fixed length (the storage's second dimension).
 
     Each row's valid length (up to its first ``end_key`` flag) is kept on write, so that HER
-    reads it per draw instead of scanning the flags.
+    reads it per draw instead of scanning the flags; rows another process wrote (:attr:`row_writes`)
+    are read at the next draw.
     """
 
     end_key: NestedKey = ("next", "done")
     _lengths: torch.Tensor | None = None
     _common_length: int | None = None
+    row_writes: RowWrites | None = None  # from the first write on
+    _lengths_watch: RowWriteWatch | None = None
 
     def valid_lengths(self, rows: torch.Tensor) -> torch.Tensor:
         """Valid steps of the episodes stored in ``rows``."""
@@ -45,8 +108,17 @@ class _EpisodeRows:
 
     def _read_lengths_if_unknown(self) -> None:
         if self._lengths is None:  # restored from a checkpoint: read them from the flags once
-            self._lengths = episode_lengths(_upstream.stored_tensordict(self), self.end_key)
+            stored = _upstream.stored_tensordict(self)
+            if self.row_writes is None:  # restored without a write
+                self.row_writes = RowWrites(stored.shape[0])
+            self._lengths_watch = self.row_writes.watch()
+            self._lengths = episode_lengths(stored, self.end_key)
             # Unwritten rows hold no end flag, so they count as full rows: one check covers the filled ones.
+            self._common_length = common_length(self._lengths)
+            return
+        rows = self._lengths_watch.new_rows()
+        if rows.numel():  # written by another process
+            self._lengths[rows] = episode_lengths(self.get(rows), self.end_key)
             self._common_length = common_length(self._lengths)
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
@@ -54,13 +126,17 @@ class _EpisodeRows:
             self._check_rows(data)
         super().set(cursor, data, set_cursor=set_cursor)
         if isinstance(data, TensorDictBase):
+            n_rows = self.max_size // self.shape[1]
+            rows = torch.arange(n_rows)[cursor].reshape(-1)
+            if self.row_writes is None:
+                self.row_writes = RowWrites(n_rows)
+            self.row_writes.record(rows)
             if self._lengths is None:  # first write, or first since a restore: every row from its flags
                 self._read_lengths_if_unknown()
             else:
-                # self.shape counts the filled rows only; the lengths cover every row.
-                n_rows = self._lengths.numel()
-                self._lengths[torch.arange(n_rows)[cursor]] = episode_lengths(data, self.end_key)
+                self._lengths[rows] = episode_lengths(data, self.end_key)
                 self._common_length = common_length(self._lengths)
+                self._lengths_watch.saw(rows)
 
     def _check_rows(self, data: TensorDictBase) -> None:
         """Refuses a write whose rows cannot each be one episode of the storage's length."""
@@ -186,6 +262,12 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         super().__init__(int(capacity), ndim=2, device=device)
         self.end_key = end_key
         self._layout_source: TensorDictBase | None = None
+
+    def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
+        super().set(cursor, data, set_cursor=set_cursor)
+        if isinstance(data, TensorDictBase):
+            # Laid out once it holds data, not at the first draw: a process it is sent to writes into the same blocks.
+            self._layout()
 
     def _layout(self) -> tuple[list[tuple[torch.Tensor, list[int]]], list[tuple], int]:
         """The flat dtype blocks with their entries' widths, and the read plan; rebuilt when the storage is replaced."""

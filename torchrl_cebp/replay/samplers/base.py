@@ -24,15 +24,11 @@ from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import common_length, episode_lengths, valid_steps
+from torchrl_cebp.replay.storage import RowWriteWatch
 
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
 # TorchRL's samplers' words for it, so that code catching theirs catches ours.
 EMPTY_STORAGE_ERROR = "Cannot sample from an empty storage."
-# Why a sampler refuses to score episodes in another process than the one that draws: the supported way instead.
-EXTEND_IN_THE_LEARNER = (
-    "it would score episodes this process never draws. Extend the buffer in the process that samples it, with the "
-    "collector's batches (writer=EpisodeWriter(T) assembles their episodes)."
-)
 
 
 def require_key(
@@ -111,9 +107,12 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     writer notifies the sampler through :meth:`mark_update` after each write,
     which is when the priority of each written episode is computed. A sampler
     given a storage that already holds episodes scores them all when it first
-    meets it. Priorities live in the process that draws: a copy of the sampler
-    in another process (a forked worker, a collector's ``replay_buffer=``)
-    refuses to score the episodes written there, with the supported way.
+    meets it. Priorities live in the process that draws: sent with the buffer
+    to a spawned process (a collector's ``replay_buffer=``), the sampler leaves
+    the episodes written there to the drawing process, which scores them at its
+    next draw from the storage's shared row counts
+    (:class:`~torchrl_cebp.replay.storage.RowWrites`); a forked copy, or a storage
+    that keeps no such counts, refuses with the supported way.
 
     Args:
         end_key (NestedKey): the flag that ends an episode before its row does.
@@ -148,6 +147,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._tree: SumSegmentTreeFp64 | None = None
         self._n_stored = 0
         self._owner_pid = os.getpid()
+        self._spawned_copy = False  # sent to another process, where it leaves each write to the owner
+        self._writes_watch: RowWriteWatch | None = None
 
     # ---- what subclasses define -------------------------------------------------
     @abc.abstractmethod
@@ -197,13 +198,45 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 f"{type(self).__name__} computes priorities from the written episodes and "
                 "needs the storage: use it inside a replay buffer whose writer notifies it."
             )
-        if os.getpid() != self._owner_pid:  # a forked copy: the writes of this process would go unseen by the owner
+        if os.getpid() != self._owner_pid:
+            if self._spawned_copy and getattr(storage, "row_writes", None) is not None:
+                return  # the storage counted the write in memory the owner shares: it scores the rows at its next draw
             raise RuntimeError(
-                f"{type(self).__name__} keeps its priorities in process {self._owner_pid}, which draws; scoring "
-                f"episodes in process {os.getpid()}, {EXTEND_IN_THE_LEARNER}"
+                f"{type(self).__name__} keeps its priorities in process {self._owner_pid}, which draws, and cannot "
+                f"learn of the episodes process {os.getpid()} writes: a forked process, or a storage without shared "
+                "row counts, leaves it none. Send the buffer over an EpisodeStorage (or EpisodeMemmapStorage) to a "
+                "spawned process (torch.multiprocessing's 'spawn', a collector's replay_buffer=), or extend it in the "
+                "process that samples it, with the collector's batches (writer=EpisodeWriter(T) assembles their "
+                "episodes)."
             )
+        watch = self._watch(storage)
         # On first meeting a storage, the rows it held before count as written now.
-        self._score_rows(stored_rows(index) if self._tree is not None else torch.arange(storage.shape[0]), storage)
+        rows = stored_rows(index) if self._tree is not None else torch.arange(storage.shape[0])
+        self._score_rows(rows, storage)
+        if watch is not None:
+            watch.saw(rows)
+
+    def _watch(self, storage: Storage) -> RowWriteWatch | None:
+        """This sampler's watch of the storage's row counts (``None`` for a storage without them)."""
+        writes = getattr(storage, "row_writes", None)
+        if writes is None:
+            return None
+        if self._writes_watch is None or self._writes_watch.writes is not writes:
+            self._writes_watch = writes.watch()
+        return self._writes_watch
+
+    def _catch_up(self, storage: Storage) -> None:
+        """Scores the rows no write told this sampler of: all the storage holds when it first meets it, then the
+        rows other processes write (O(rows) after such a write, one shared read when there was none)."""
+        watch = self._watch(storage)
+        if self._tree is None:
+            if len(storage):
+                self._score_rows(torch.arange(storage.shape[0]), storage)
+            return
+        if watch is not None:
+            rows = watch.new_rows()
+            if rows.numel():
+                self._score_rows(rows, storage)
 
     def _score_rows(self, rows: torch.Tensor, storage: Storage) -> None:
         if getattr(storage, "ndim", 1) != 2:
@@ -279,8 +312,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         return self._priorities[rows] / self._tree.query(0, self._tree.size)
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
-        if self._tree is None and len(storage):  # a new sampler over a storage that holds episodes
-            self._score_rows(torch.arange(storage.shape[0]), storage)
+        self._catch_up(storage)
         if self._n_stored == 0:
             raise RuntimeError(EMPTY_STORAGE_ERROR)
         if self._lengths_unread:
@@ -322,18 +354,21 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._tree = SumSegmentTreeFp64(self._priorities.numel())
         if self._priorities.numel():
             self._tree[torch.arange(self._priorities.numel())] = self._priorities
+        self._writes_watch = None  # the state matches the storage's rows as they are now
 
     def __getstate__(self) -> dict[str, Any]:
-        if get_spawning_popen() is not None:  # pickled for a new process, as TorchRL's PrioritizedSampler checks
-            raise RuntimeError(
-                f"{type(self).__name__} keeps its priorities in this process: in another one (a buffer handed to "
-                f"MultiSyncCollector(replay_buffer=...), or to a spawned process), {EXTEND_IN_THE_LEARNER}"
-            )
-        return super().__getstate__()
+        state = super().__getstate__()
+        if get_spawning_popen() is not None:  # sent to a new process, which writes and leaves the scoring to this one
+            # Without this process's priorities: torch would share them, and an rb.empty() there would clear them.
+            state.update(_spawned_copy=True, _priorities=torch.zeros(0, dtype=torch.float64), _tree=None,
+                         _lengths=torch.zeros(0, dtype=torch.long), _cumulative_step_weights=None, _n_stored=0,
+                         _writes_watch=None)
+        return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        # A copy (deepcopy, or unpickled elsewhere) belongs to the process that made it.
-        self.__dict__.update(state, _owner_pid=os.getpid())
+        self.__dict__.update(state)
+        if not state.get("_spawned_copy"):  # a copy (deepcopy, unpickled elsewhere) belongs to the process that made it
+            self._owner_pid = os.getpid()
 
     def _empty(self) -> None:
         self._priorities.zero_()
