@@ -43,6 +43,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--utd-ratio", type=float, default=0.4, help="updates per collected frame (HER: 40 per 100)")
     parser.add_argument("--batch-size", type=int, default=256)
     parser.add_argument("--buffer-size", type=int, default=1_000_000, help="capacity in transitions")
+    parser.add_argument("--refit-frames", type=int, default=5_000,
+                        help="frames between MEP's refits of its density model (HER's epoch at two envs)")
     return parser.parse_args(argv)
 
 
@@ -75,6 +77,7 @@ def main(argv: list[str] | None = None) -> tuple[TensorDictReplayBuffer, TensorD
     # HER's normaliser learns from the relabelled transitions of each new episode, as baselines' does.
     normalizer_feed = RelabelledTransitions(her)
     beta_scheduler = beta_annealing(sampler)  # PER's beta, 0.4 -> 1; None for the other samplers
+    refit = getattr(sampler, "refit", None)  # MEP re-ranks the stored episodes on a schedule; the others need nothing
 
     def update(batch: TensorDict) -> TensorDict:
         agent.normalizer(batch)  # the actor and critic read the normalised observation and (relabelled) goal
@@ -97,6 +100,8 @@ def main(argv: list[str] | None = None) -> tuple[TensorDictReplayBuffer, TensorD
         ended = torch.unique(index[index >= 0] // dims.episode_steps)
         if ended.numel():
             agent.normalizer.update(normalizer_feed(replay_buffer.storage[ended]))
+        if refit is not None and collected_frames % args.refit_frames < tensordict.numel():
+            refit(replay_buffer.storage)
 
         # No episode has ended before the first episode_steps frames: nothing to draw yet.
         if len(replay_buffer):

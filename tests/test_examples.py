@@ -25,12 +25,12 @@ def test_ddpg_her_says_how_to_run_it(capsys):
     assert done.value.code == 0 and "--sampler" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("sampler", ["cebp", "per"])
+@pytest.mark.parametrize("sampler", ["cebp", "per", "mep"])
 def test_ddpg_her_trains_on_whole_relabelled_episodes_in_torchrls_loop(sampler, capsys):
     # 150 frames per env lane: three 50-step episodes each, ended across batches of 30 frames per lane.
     replay_buffer, losses = load_example("ddpg_her").main(
         ["--sampler", sampler, "--total-frames", "300", "--frames-per-batch", "60", "--utd-ratio", "0.1",
-         "--batch-size", "64", "--buffer-size", "5000"])
+         "--batch-size", "64", "--buffer-size", "5000", "--refit-frames", "120"])
     assert "frames 300/300  episodes 6" in capsys.readouterr().out
     episodes = replay_buffer.storage.get(slice(None))
     assert episodes.shape == (6, 50) and bool((episode_lengths(episodes) == 50).all())
