@@ -4,7 +4,7 @@ import pytest
 import torch
 from torchrl.envs import Transform, TransformedEnv
 
-from tests.replay.conftest import T, make_episodes, sparse_reward
+from tests.replay.conftest import T, sparse_reward
 from tests.replay.test_buffer import SAMPLERS
 from tests.replay.test_her import decode, labelled_episodes
 from torchrl_cebp.envs import make_env

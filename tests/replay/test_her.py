@@ -5,7 +5,6 @@ import re
 
 import pytest
 import torch
-from tensordict import TensorDict
 from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 from torchrl.envs import Compose, ObservationNorm, RewardScaling
 

@@ -4,7 +4,6 @@ import itertools
 
 import pytest
 import torch
-from tensordict import TensorDict
 from torchrl.collectors import Collector, MultiAsyncCollector, MultiSyncCollector
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs import TransformedEnv
