@@ -32,10 +32,15 @@ from torchrl_cebp.training.trainer import RelabelledTransitions, beta_annealing
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
+def config_choices(group: str) -> list[str]:
+    """The configs of a group of ``conf/`` (e.g. ``"sampler"``), so that a wrong name is refused with the right ones."""
+    return sorted(path.stem for path in (CONF / group).glob("*.yaml"))
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default="push", help="a config of conf/env/ (push, pick_place, slide, ...)")
-    parser.add_argument("--sampler", default="cebp", help="a config of conf/sampler/ (her, cebp, per, ...)")
+    parser.add_argument("--env", default="push", choices=config_choices("env"), help="a config of conf/env/")
+    parser.add_argument("--sampler", default="cebp", choices=config_choices("sampler"), help="a config of conf/sampler/")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--envs", type=int, default=2, help="simulations the collector steps, as one batched env")
     parser.add_argument("--frames-per-batch", type=int, default=100)

@@ -42,3 +42,10 @@ def test_ddpg_her_trains_on_whole_relabelled_episodes_in_torchrls_loop(sampler, 
     reward = make_env("push").compute_reward(batch["next", "achieved_goal"], batch["desired_goal"])
     assert torch.equal(batch["next", "reward"], reward)  # every reward is the one of the goal the batch holds
     assert losses.shape == (6,) and all(bool(torch.isfinite(value).all()) for value in losses.values())
+
+
+def test_ddpg_her_refuses_an_unknown_sampler_naming_the_configs(capsys):
+    with pytest.raises(SystemExit) as done:
+        load_example("ddpg_her").main(["--sampler", "foo"])
+    error = capsys.readouterr().err
+    assert done.value.code == 2 and "invalid choice: 'foo'" in error and "'cebp_initial'" in error
