@@ -172,3 +172,22 @@ def test_one_sampler_instance_for_two_workers_is_refused():
     shared = UniformEpisodeSampler()
     with pytest.raises(ValueError, match="separate sampler instance"):
         PerWorkerSampler(shared, shared)
+
+
+def _extend(rb, episodes):
+    rb.extend(episodes)
+
+
+def test_the_workers_score_the_episodes_a_spawned_process_writes():
+    # Sent to a spawned process with a shared EpisodeStorage, the buffer's writes there reach every worker's sampler.
+    sampler = PerWorkerSampler(UniformEpisodeSampler(), UniformEpisodeSampler(), episodes_per_worker=PER_WORKER)
+    rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward), capacity=8 * T, batch_size=512, shared=True)
+    rb.extend(hand_made(4, seed=0))  # rows 0-3: two episodes per worker
+    child = torch.multiprocessing.get_context("spawn").Process(target=_extend, args=(rb, hand_made(4, seed=1)))
+    child.start()
+    child.join(timeout=120)
+    assert child.exitcode == 0
+    rows = rb.sample()["index"][:, 0]
+    assert set(rows.tolist()) == set(range(8))  # rows 4-7, written in the child, are drawn too
+    assert (rows[:256] % 4 < 2).all() and (rows[256:] % 4 >= 2).all()  # each worker from its own rows
+    assert [shard.n_episodes for shard in sampler.samplers] == [4, 4]

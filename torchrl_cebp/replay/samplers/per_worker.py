@@ -27,6 +27,7 @@ from torchrl.data.replay_buffers.samplers import Sampler
 from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp.replay.samplers.base import split_index
+from torchrl_cebp.replay.storage import RowWrites, RowWriteWatch
 
 
 def storage_rows(
@@ -66,6 +67,19 @@ class WorkerRows:
         self.storage = storage
         self.worker, self.workers, self.episodes_per_worker = worker, workers, episodes_per_worker
         self.block = workers * episodes_per_worker  # the rows one cycle of every worker's envs fills
+        self._row_writes: WorkerRowWrites | None = None
+
+    @property
+    def row_writes(self) -> WorkerRowWrites | None:
+        """The storage's shared write counts of this worker's rows (``None`` if it keeps none), always the same
+        object: through it the worker's sampler learns of the rows another process wrote, as over a whole storage."""
+        writes = getattr(self.storage, "row_writes", None)
+        if writes is None:
+            return None
+        if self._row_writes is None or self._row_writes.writes is not writes:
+            every_row = torch.arange(self.rows_within(self.storage.max_size // self.storage.shape[1]))
+            self._row_writes = WorkerRowWrites(writes, self.global_rows(every_row))
+        return self._row_writes
 
     def global_rows(self, local_rows: torch.Tensor) -> torch.Tensor:
         """The storage rows of this worker's ``local_rows``."""
@@ -95,6 +109,28 @@ class WorkerRows:
         if isinstance(index, tuple):
             return self.storage.get((self.global_rows(torch.as_tensor(index[0])), *index[1:]))
         return self.storage.get(self.global_rows(torch.as_tensor(index)))
+
+
+class WorkerRowWrites:
+    """A worker's rows of a storage's :class:`~torchrl_cebp.replay.storage.RowWrites`, read through (never copied).
+
+    What a :class:`~torchrl_cebp.replay.storage.RowWriteWatch` reads: ``per_row`` (in the worker's local rows)
+    and ``total``.
+    """
+
+    def __init__(self, writes: RowWrites, rows: torch.Tensor) -> None:
+        self.writes, self.rows = writes, rows
+
+    @property
+    def per_row(self) -> torch.Tensor:
+        return self.writes.per_row.index_select(0, self.rows)
+
+    @property
+    def total(self) -> torch.Tensor:
+        return self.writes.total
+
+    def watch(self) -> RowWriteWatch:
+        return RowWriteWatch(self)
 
 
 class PerWorkerSampler(Sampler):
