@@ -159,7 +159,6 @@ class PERSampler(PrioritizedSampler):
         )
 
 
-
 def _plain_state(torchrl_state: dict[str, Any]) -> dict[str, Any]:
     """A TorchRL ``PrioritizedSampler`` state in :meth:`PERSampler.state_dict`'s form (without a scheduler)."""
     every = torch.arange(torchrl_state["_sum_tree"].size)

@@ -66,7 +66,6 @@ class WorkerRows:
     def __init__(self, storage: Storage, worker: int, workers: int, episodes_per_worker: int) -> None:
         self.storage = storage
         self.worker, self.workers, self.episodes_per_worker = worker, workers, episodes_per_worker
-        self.block = workers * episodes_per_worker  # the rows one cycle of every worker's envs fills
         self._row_writes: WorkerRowWrites | None = None
 
     @property
@@ -87,9 +86,7 @@ class WorkerRows:
 
     def rows_within(self, global_rows: int) -> int:
         """How many of the first ``global_rows`` storage rows are this worker's."""
-        full, rest = divmod(global_rows, self.block)
-        e = self.episodes_per_worker
-        return full * e + min(max(rest - self.worker * e, 0), e)
+        return rows_of_worker(global_rows, self.worker, self.workers, self.episodes_per_worker)
 
     @property
     def shape(self) -> torch.Size:
@@ -109,6 +106,17 @@ class WorkerRows:
         if isinstance(index, tuple):
             return self.storage.get((self.global_rows(torch.as_tensor(index[0])), *index[1:]))
         return self.storage.get(self.global_rows(torch.as_tensor(index)))
+
+
+def rows_of_worker(rows: int, worker: int, workers: int, episodes_per_worker: int) -> int:
+    """How many of a storage's first ``rows`` rows are ``worker``'s (see :class:`WorkerRows`); worker 0 has the most.
+
+    Example:
+        >>> rows_of_worker(14285, 0, 8, 2), rows_of_worker(14285, 7, 8, 2)
+        (1786, 1784)
+    """
+    full, rest = divmod(rows, workers * episodes_per_worker)
+    return full * episodes_per_worker + min(max(rest - worker * episodes_per_worker, 0), episodes_per_worker)
 
 
 class WorkerRowWrites:
