@@ -220,12 +220,14 @@ def test_num_envs_partial_reset_leaves_the_other_simulations_running():
     assert env._steps.tolist() == [0, 1]
 
 
-def test_episode_steps_set_a_fetch_tasks_episode_length():
+def test_episode_steps_set_a_tasks_episode_length():
     env = make_env("slide", "standard", num_envs=2, episode_steps=70)
     td = env.rollout(100, break_when_any_done=True)
     assert env.max_episode_steps == 70 and td.shape == (2, 70) and td["next", "truncated"][:, -1].all()
     assert make_env("slide", "standard").max_episode_steps == 50  # gymnasium's, unless asked
     config = {"task": "slide", "goal_space": "standard", "episode_steps": 70}
     assert make_env_from_config(config).max_episode_steps == 70
-    with pytest.raises(ValueError, match="the Franka task's episodes are fixed"):
-        make_env("franka_pick_place", episode_steps=50)
+    franka = make_env("franka_pick_place", num_envs=2, episode_steps=50)
+    td = franka.rollout(100, break_when_any_done=True)
+    assert franka.max_episode_steps == 50 and td.shape == (2, 50) and td["next", "truncated"][:, -1].all()
+    assert make_env("franka_pick_place").max_episode_steps == 100  # the paper's, unless asked

@@ -381,11 +381,13 @@ def test_a_checkpoint_from_before_per_worker_replay_resumes_only_as_merged():
         check_same_run(saved, config("workers=2"))
 
 
-def test_slide_stage_runs_70_step_episodes_in_its_own_folder_and_the_length_is_checked():
+def test_episode_steps_give_slide_and_the_franka_their_own_length_and_folder():
     cfg = config("+comparison=slide_standard")
     assert cfg.env.episode_steps == 70 and env_label(cfg.env) == "slide-standard-T70"
     assert episode_steps(cfg) == 70 and episode_steps(config("env=slide")) == 50
     with pytest.raises(ConfigError, match="env.episode_steps=1: must be null or an integer above 1"):
         validate_config(config("env.episode_steps=1"))
-    with pytest.raises(ConfigError, match="env.episode_steps=50: must be null for the Franka task"):
-        validate_config(config("env=franka_pick_place", "env.episode_steps=50"))
+    franka = config("env=franka_pick_place", "env.episode_steps=50")
+    validate_config(franka)
+    assert episode_steps(franka) == 50 and env_label(franka.env) == "franka_pick_place-standard-T50"
+    assert episode_steps(config("env=franka_pick_place")) == 100

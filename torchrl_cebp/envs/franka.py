@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import gymnasium as gym
@@ -334,12 +334,20 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
 def make_franka(goal_space: str = "standard", **kwargs: Any) -> FrankaPickPlaceEnv:
     """The (unwrapped) gymnasium Franka env; its one goal space is the paper's, called ``standard``.
 
+    ``max_episode_steps`` replaces the layout's episode length (100, the paper's), as it does for Fetch.
+
     Example:
         >>> make_franka().reset(seed=1)[0]["desired_goal"].shape
         (3,)
+        >>> make_franka(max_episode_steps=50).max_episode_steps
+        50
     """
     if goal_space != "standard":
         raise ValueError(f"Unknown goal space {goal_space!r} for {FRANKA_TASK}; valid goal spaces: standard")
+    if "max_episode_steps" in kwargs:
+        # As gymnasium-robotics' Fetch takes it: the episode length is the layout's, so it reaches the env's truncation.
+        steps = kwargs.pop("max_episode_steps")
+        kwargs["layout"] = replace(kwargs.get("layout", FrankaLayout()), max_episode_steps=steps)
     return FrankaPickPlaceEnv(**kwargs)
 
 

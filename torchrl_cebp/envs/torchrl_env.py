@@ -12,7 +12,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from torchrl_cebp.envs.franka import FRANKA_TASK, FrankaLayout, make_franka
+from torchrl_cebp.envs.franka import FRANKA_TASK, make_franka
 from torchrl_cebp.envs.goal_spaces import TASKS
 from torchrl_cebp.envs.joint_control import check_control
 from torchrl_cebp.envs.touch_fetch import make_touch_fetch
@@ -110,9 +110,6 @@ class TouchFetchEnv(EnvBase):
         super().__init__(device=device, batch_size=batch_size)
         options = {} if render_size is None else {"render_mode": "rgb_array", "width": render_size[0], "height": render_size[1]}
         if episode_steps is not None:
-            if task == FRANKA_TASK:
-                raise ValueError(f"episode_steps={episode_steps}: the Franka task's episodes are fixed "
-                                 f"({FrankaLayout().max_episode_steps} steps); it applies to the Fetch tasks {TASKS}")
             options["max_episode_steps"] = episode_steps
         self._sims = [make_goal_env(task, goal_space, robot, **options) for _ in range(max(1, batch_size.numel()))]
         first = self._sims[0]
@@ -249,8 +246,8 @@ def make_env(
     Fetch tasks have the ``standard`` and ``extended`` goal spaces and both robots (:class:`RobotOptions`:
     ``control``, ``touch_ignores_table``, ``touch_in_observation``); the Franka task only ``standard`` and mocap.
 
-    ``episode_steps`` replaces a Fetch task's episode length (``None``: its goal space's; the Initial commit
-    ran Slide with 70 steps on the standard goals, gymnasium's Slide has 50).
+    ``episode_steps`` replaces the task's episode length (``None``: its goal space's, or the Franka's 100; the
+    Initial commit ran Slide with 70 steps on the standard goals, gymnasium's Slide has 50).
 
     ``num_envs=n`` gives one env of batch size ``[n]`` stepping ``n`` simulations (seeded
     ``seed``, ``seed + 1``, ...); ``render_size=(width, height)`` enables ``env.render()``. Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.

@@ -127,10 +127,7 @@ def validate_config(cfg: DictConfig) -> None:
     check("resume", lambda v: isinstance(v, bool), "true or false")
     check("overlap_collection", lambda v: isinstance(v, bool), "true or false")
     check("replay.per_worker", lambda v: isinstance(v, bool), "true or false")
-    if OmegaConf.select(cfg, "env.task") == FRANKA_TASK:
-        check("env.episode_steps", lambda v: v is None, "null for the Franka task (its episodes are fixed)")
-    else:
-        check("env.episode_steps", lambda v: v is None or (_is_int(v) and v > 1), "null or an integer above 1")
+    check("env.episode_steps", lambda v: v is None or (_is_int(v) and v > 1), "null or an integer above 1")
     check("collector_processes", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
     real_in("replay.future_p", 0.0, 1.0)
     real_in("agent.tau", 0.0, 1.0, open_low=True)
