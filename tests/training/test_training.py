@@ -381,6 +381,14 @@ def test_a_checkpoint_from_before_per_worker_replay_resumes_only_as_merged():
         check_same_run(saved, config("workers=2"))
 
 
+def test_a_checkpoint_from_before_env_episode_steps_resumes_at_the_tasks_own_length():
+    saved = OmegaConf.to_container(config("env=franka_pick_place"), resolve=True)
+    del saved["env"]["episode_steps"]
+    check_same_run(saved, config("env=franka_pick_place"))
+    with pytest.raises(ConfigError, match="episode_steps': None.*episode_steps': 50"):
+        check_same_run(saved, config("env=franka_pick_place", "env.episode_steps=50"))
+
+
 def test_episode_steps_give_slide_and_the_franka_their_own_length_and_folder():
     cfg = config("+comparison=slide_standard")
     assert cfg.env.episode_steps == 70 and env_label(cfg.env) == "slide-standard-T70"

@@ -203,8 +203,8 @@ RUN_DEFINING_KEYS = (
 
 
 # What a checkpoint made before a run-defining key existed ran with: checkpoints before per-worker replay
-# merged the workers' episodes into one buffer.
-LEGACY_DEFAULTS: dict[tuple[str, str], object] = {("replay", "per_worker"): False}
+# merged the workers' episodes into one buffer, and those before env.episode_steps ran the task's own length.
+LEGACY_DEFAULTS: dict[tuple[str, str], object] = {("replay", "per_worker"): False, ("env", "episode_steps"): None}
 
 
 def with_legacy_defaults(saved: dict) -> dict:
