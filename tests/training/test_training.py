@@ -20,7 +20,7 @@ from torchrl_cebp.training.config import check_same_run, env_label, warn_if_bf16
 from torchrl_cebp.training.builders import (
     TaskDims, derive_seed, episode_steps, make_agent, make_env, make_replay, make_sampler, make_training_collector,
 )
-from torchrl_cebp.training.checkpoint import CHECKPOINT_NAME, POLICY_NAME
+from torchrl_cebp.training.checkpoint import BEST_POLICY_NAME, BestPolicy, CHECKPOINT_NAME, POLICY_NAME
 from torchrl_cebp.training.evaluation import evaluate_success_rate
 from torchrl_cebp.training.trainer import TEST_STREAM, RelabelledTransitions
 
@@ -63,12 +63,25 @@ def test_tiny_run_writes_csv_and_checkpoint(tmp_path, sampler):
     assert float(log[-1]["test_success"]) == evaluate_success_rate(test_env, load_policy(tmp_path), cfg.test_episodes)
 
 
+def test_best_policy_is_the_last_epoch_with_the_highest_success_across_a_resume(tmp_path):
+    train(config("sampler=her", "env=push", "epochs=2", "test_episodes=4"), tmp_path)
+    train(config("sampler=her", "env=push", "epochs=4", "test_episodes=4", "resume=true"), tmp_path)
+    successes = [float(row["test_success"]) for row in rows(tmp_path / "progress.csv")]
+    best = torch.load(tmp_path / BEST_POLICY_NAME, weights_only=True)
+    assert best["test_success"] == pytest.approx(max(successes))
+    assert best["epoch"] == max(epoch for epoch, success in enumerate(successes) if success == max(successes))
+    # a record is kept: a later, worse epoch does not replace it
+    assert not BestPolicy(tmp_path).offer({**best, "epoch": 9, "test_success": best["test_success"] - 0.01})
+    assert torch.load(tmp_path / BEST_POLICY_NAME, weights_only=True)["epoch"] == best["epoch"]
+
+
 def test_policy_file_is_small_and_acts_as_the_checkpoint(tmp_path):
     train(config("sampler=her", "env=pick_place", "epochs=1", "agent.hidden=[256,256,256]"), tmp_path)
     policy_file = tmp_path / POLICY_NAME
     assert policy_file.stat().st_size < 1_000_000  # the paper's 3x256 actor and the normaliser, no replay
     state = torch.load(policy_file, weights_only=True)
-    assert set(state) == {"format", "env", "hidden", "actor", "normalizer"} and state["env"]["task"] == "pick_place"
+    assert set(state) == {"format", "env", "hidden", "actor", "normalizer", "epoch", "test_success"}
+    assert state["env"]["task"] == "pick_place" and state["epoch"] == 0
     observations = TensorDict(observation=torch.randn(8, 25), desired_goal=torch.randn(8, 3), batch_size=[8])
     from_file, from_checkpoint = load_policy(policy_file), load_policy(tmp_path / CHECKPOINT_NAME)
     actions = from_file(observations.clone())["action"]

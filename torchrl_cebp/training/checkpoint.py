@@ -1,11 +1,13 @@
 """Checkpoints and policy files: plain tensors and dicts (loadable with ``weights_only=True``), written atomically.
 
-A run directory holds ``checkpoint.pt`` (everything a resumed run needs, replay buffer included) and
-``policy.pt`` (what acting needs: the actor and the observation normaliser, a few hundred KB).
+A run directory holds ``checkpoint.pt`` (everything a resumed run needs, replay buffer included),
+``policy.pt`` (what acting needs: the actor and the observation normaliser, a few hundred KB) and
+``best_policy.pt`` (the policy of the epoch with the highest test success so far).
 """
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -22,6 +24,7 @@ from torchrl_cebp.training.config import ConfigError, check_same_run
 
 CHECKPOINT_NAME = "checkpoint.pt"
 POLICY_NAME = "policy.pt"
+BEST_POLICY_NAME = "best_policy.pt"
 POLICY_FORMAT = "torchrl_cebp.policy/1"
 # 2: episodes from TorchRL collectors, one optimiser over actor and critic. Runs of format 1 (a hand-written
 # rollout worker) cannot be continued by this trainer: their exploration streams differ.
@@ -115,8 +118,10 @@ def set_rng_state(state: dict[str, Any]) -> None:
         torch.cuda.set_rng_state_all(state["cuda"])
 
 
-def policy_state(cfg: DictConfig, agent: Agent) -> dict[str, Any]:
+def policy_state(cfg: DictConfig, agent: Agent, **record: int | float) -> dict[str, Any]:
     """What acting needs, as plain tensors: the actor, the observation normaliser, the hidden sizes and the env config.
+
+    ``record`` adds plain numbers about the policy, e.g. ``epoch=`` and ``test_success=``.
 
     Example:
         >>> from omegaconf import OmegaConf
@@ -132,7 +137,44 @@ def policy_state(cfg: DictConfig, agent: Agent) -> dict[str, Any]:
         "hidden": list(cfg.agent.hidden),
         "actor": agent.policy[1].state_dict(),
         "normalizer": agent.normalizer.state_dict(),
+        **record,
     }
+
+
+class BestPolicy:
+    """Keeps a run's best policy in ``run_dir/best_policy.pt``: the last epoch whose test success is the highest.
+
+    What it has to beat is read back from the file, so a resumed run keeps comparing with the epochs before it.
+    Ties replace the file: the later policy has trained longer for the same score.
+
+    Example:
+        >>> import tempfile
+        >>> from omegaconf import OmegaConf
+        >>> from torchrl_cebp.training.builders import TaskDims, make_agent
+        >>> cfg = OmegaConf.create({"env": {"task": "push"}, "agent": {"hidden": [32], "random_eps": 0.3,
+        ...                         "noise_std": 0.2, "action_l2": 1.0, "tau": 0.05}})
+        >>> agent = make_agent(cfg, TaskDims(25, 3, 4, 50))
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     best = BestPolicy(d)
+        ...     best.offer(policy_state(cfg, agent, epoch=0, test_success=0.4)), best.offer(policy_state(cfg, agent, epoch=1, test_success=0.3))
+        ...     BestPolicy(d).test_success
+        (True, False)
+        0.4
+    """
+
+    def __init__(self, run_dir: str | Path) -> None:
+        self.path = Path(run_dir) / BEST_POLICY_NAME
+        self.test_success = -math.inf
+        if self.path.is_file():
+            self.test_success = float(torch.load(self.path, map_location="cpu", weights_only=True)["test_success"])
+
+    def offer(self, state: dict[str, Any]) -> bool:
+        """Writes ``state`` (a :func:`policy_state` with ``test_success``) if it scores at least the best so far."""
+        if state["test_success"] < self.test_success:
+            return False
+        save_policy(state, self.path)
+        self.test_success = float(state["test_success"])
+        return True
 
 
 def save_policy(state: dict[str, Any], path: str | Path) -> Path:
