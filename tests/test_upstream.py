@@ -71,18 +71,20 @@ def test_an_unchecked_tensordict_equals_a_checked_one():
     assert list(built.keys(True, True)) == ["a", "b", ("next", "a")]
 
 
-def test_a_prioritized_sampler_round_trips_through_plain_tensors():
-    def filled():
-        sampler = PrioritizedSampler(10 * T, alpha=0.7, beta=0.5)
-        rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * T, ndim=2), sampler=sampler, dim_extend=0,
-                                    batch_size=64, priority_key="td_error")
-        rb.extend(make_episodes(3))
-        batch = rb.sample()
-        batch.set("td_error", torch.linspace(0.0, 3.0, 64))
-        rb.update_tensordict_priority(batch)
-        return rb
+def prioritized_buffer() -> TensorDictReplayBuffer:
+    """Three episodes under TorchRL's prioritized sampler, with priorities updated once."""
+    sampler = PrioritizedSampler(10 * T, alpha=0.7, beta=0.5)
+    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * T, ndim=2), sampler=sampler, dim_extend=0,
+                                batch_size=64, priority_key="td_error")
+    rb.extend(make_episodes(3))
+    batch = rb.sample()
+    batch.set("td_error", torch.linspace(0.0, 3.0, 64))
+    rb.update_tensordict_priority(batch)
+    return rb
 
-    rb = filled()
+
+def test_a_prioritized_sampler_round_trips_through_plain_tensors():
+    rb = prioritized_buffer()
     state = _upstream.prioritized_state(rb.sampler)
     assert all(isinstance(v, (torch.Tensor, float)) for v in state.values() if v is not None)
     copy = PrioritizedSampler(10 * T, alpha=0.1, beta=0.1)
@@ -103,6 +105,14 @@ def test_a_prioritized_sampler_round_trips_through_plain_tensors():
         sampler.mark_update(fresh)
     assert torch.equal(torch.as_tensor(copy._sum_tree[fresh]), torch.as_tensor(rb.sampler._sum_tree[fresh]))
     assert (torch.as_tensor(copy._sum_tree[fresh]) > 0).all()
+
+
+def test_torchrls_own_prioritized_state_reads_as_the_plain_one():
+    rb = prioritized_buffer()
+    ours, theirs = _upstream.prioritized_state(rb.sampler), _upstream.prioritized_state_of(rb.sampler.state_dict())
+    assert ours.keys() == theirs.keys()
+    for key, value in ours.items():
+        assert torch.equal(torch.as_tensor(value), torch.as_tensor(theirs[key])), key
 
 
 def test_excluded_transitions_are_never_drawn():

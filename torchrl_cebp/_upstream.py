@@ -54,18 +54,33 @@ def prioritized_state(sampler: PrioritizedSampler) -> dict[str, Any]:
     Its own ``state_dict`` holds the C++ segment trees, which ``torch.load(weights_only=True)``
     refuses; the trees' values and the running maximum are only reachable privately.
     """
-    every = torch.arange(sampler.max_size)
-    max_value, max_index = sampler._max_priority
+    return _plain_prioritized(sampler.alpha, sampler.beta, sampler._eps, sampler._max_priority,
+                              sampler._sum_tree, sampler._min_tree, sampler.max_size)
+
+
+def prioritized_state_of(torchrl_state: dict[str, Any]) -> dict[str, Any]:
+    """A TorchRL ``PrioritizedSampler.state_dict()`` in :func:`prioritized_state`'s form.
+
+    TorchRL's state names its entries after the sampler's private attributes, and holds the C++ trees.
+    """
+    return _plain_prioritized(torchrl_state["_alpha"], torchrl_state["_beta"], torchrl_state["_eps"],
+                              torchrl_state["_max_priority"], torchrl_state["_sum_tree"], torchrl_state["_min_tree"],
+                              torchrl_state["_sum_tree"].size)
+
+
+def _plain_prioritized(alpha, beta, eps, max_priority, sum_tree, min_tree, size: int) -> dict[str, Any]:
+    every = torch.arange(size)
+    max_value, max_index = max_priority
     return {
         # Plain floats: a TorchRL scheduler leaves numpy scalars, which weights_only loads refuse.
-        "alpha": float(sampler.alpha),
-        "beta": float(sampler.beta),
-        "eps": float(sampler._eps),
+        "alpha": float(alpha),
+        "beta": float(beta),
+        "eps": float(eps),
         # Copies, here and on load: a state shares no tensor with the sampler it came from or went into.
         "max_priority": None if max_value is None else torch.as_tensor(max_value).clone(),
-        "max_priority_index": None if max_index is None else torch.as_tensor(max_index).clone(),
-        "sum_tree": torch.as_tensor(sampler._sum_tree[every]),
-        "min_tree": torch.as_tensor(sampler._min_tree[every]),
+        "max_priority_index": None if max_index is None else torch.as_tensor(max_index).long().clone(),
+        "sum_tree": torch.as_tensor(sum_tree[every]),
+        "min_tree": torch.as_tensor(min_tree[every]),
     }
 
 

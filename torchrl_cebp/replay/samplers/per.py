@@ -113,7 +113,7 @@ class PERSampler(PrioritizedSampler):
         # None in a TorchRL sampler's state, nor in ours from before the scheduler was part of it.
         scheduler_state = state_dict.get("beta_scheduler")
         if "_sum_tree" in state_dict:  # TorchRL's: its C++ trees (ours holds their values as tensors)
-            state_dict = _plain_state(state_dict)
+            state_dict = _upstream.prioritized_state_of(state_dict)
         saved_capacity = state_dict["sum_tree"].numel()
         if saved_capacity != self.max_size:
             raise ValueError(
@@ -157,18 +157,3 @@ class PERSampler(PrioritizedSampler):
             f"PERSampler(alpha={self.alpha}, beta={self.beta:.3f} -> {self.beta_end} over "
             f"{self.beta_anneal_draws} draws)"
         )
-
-
-def _plain_state(torchrl_state: dict[str, Any]) -> dict[str, Any]:
-    """A TorchRL ``PrioritizedSampler`` state in :meth:`PERSampler.state_dict`'s form (without a scheduler)."""
-    every = torch.arange(torchrl_state["_sum_tree"].size)
-    max_value, max_index = torchrl_state["_max_priority"]
-    return {
-        "alpha": float(torchrl_state["_alpha"]),
-        "beta": float(torchrl_state["_beta"]),
-        "eps": float(torchrl_state["_eps"]),
-        "max_priority": None if max_value is None else torch.as_tensor(max_value),
-        "max_priority_index": None if max_index is None else torch.as_tensor(max_index).long(),
-        "sum_tree": torch.as_tensor(torchrl_state["_sum_tree"][every]),
-        "min_tree": torch.as_tensor(torchrl_state["_min_tree"][every]),
-    }
