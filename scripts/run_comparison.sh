@@ -11,13 +11,13 @@ export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 MUJOCO_GL=osmesa
 python=${PYTHON:-.venv/bin/python}
 stage() { echo "[comparison] $(date -u +%FT%TZ) $*"; "$python" train.py -m "hydra.launcher.n_jobs=${JOBS:-1}" "$@" || echo "[comparison] stage failed: $*" >&2; }
 stage +comparison=push_standard seed=0,1,2 sampler=cebp_initial "$@"          # 27.1 A: the figure's CEBP, per worker
+stage +comparison=push_released seed=0,1,2 sampler=cebp_released "$@"         # 27.2 B: the released CEBP, per worker
 stage +comparison=pick_place_standard seed=0,1,2 sampler=cebp_initial "$@"    # 28.1 A PickAndPlace, per worker
 # CPER with its published draw (HindsightRelabel strategy "past"; docs/results.md); run folders end in -her_past.
 stage +comparison=pick_place_standard seed=0,1,2 sampler=cper replay.strategy=past "$@"
 # 28.1 A PickAndPlace HER: started on the merged buffer before per-worker replay landed (uniform HER draws the
 # same distribution either way, tests/replay/test_per_worker.py), so it continues merged, in its own folders.
 stage +comparison=pick_place_standard seed=0,1,2 sampler=her replay.per_worker=false "$@"
-stage +comparison=push_released seed=0,1,2 sampler=cebp_released "$@"         # 27.2 B: the released CEBP, per worker
 stage +comparison=push_standard seed=0,1,2 sampler=cper replay.strategy=past "$@"  # 28.2 A Push: CPER
 stage +comparison=slide_standard seed=0,1,2 sampler=her,cebp_initial "$@"     # 28.3 A Slide, 70-step episodes
 stage +comparison=push_standard seed=0,1,2 sampler=per,ebp,mep "$@"           # 28.4 A Push: the other baselines
