@@ -1,10 +1,17 @@
 #!/usr/bin/env bash
-# Issue 29's Franka pick-and-place training (docs/results/sim2real/diagnosis.md): the paper's 8 workers with
-# one episode each per cycle, so that updates per env step match Fetch's (0.05), CEBP, 50 epochs, one core.
-# Resumable: rerunning continues after the last finished epoch. Usage: bash scripts/run_sim2real_training.sh [overrides]
+# Issue 29's Franka pick-and-place training (docs/results/sim2real/diagnosis.md): CEBP at the paper's 8-worker scale,
+# 800 env steps per cycle (Fetch's 0.05 updates per env step), 50 epochs, one core. EPISODE_STEPS=100 (the paper's
+# Franka episodes; one episode per worker per cycle) or 50 (Fetch PickAndPlace's, two per worker per cycle).
+# Resumable: rerunning continues after the last finished epoch. Usage: [EPISODE_STEPS=50] bash scripts/run_sim2real_training.sh [overrides]
 set -uo pipefail
 cd "$(dirname "$0")/.."
-if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,4p' "$0" | cut -c3-; exit 0; fi
+if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,5p' "$0" | cut -c3-; exit 0; fi
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 MUJOCO_GL=osmesa
-exec "${PYTHON:-.venv/bin/python}" train.py env=franka_pick_place sampler=cebp preset=paper rollouts_per_cycle=1 \
-  epochs=50 seed=0 resume=true "$@"
+steps=${EPISODE_STEPS:-100}
+case "$steps" in
+  100) length=() ;;  # the task's own length: the config (and the run folder) name none
+  50) length=(env.episode_steps=50) ;;
+  *) echo "EPISODE_STEPS=$steps: must be 100 or 50" >&2; exit 2 ;;
+esac
+exec "${PYTHON:-.venv/bin/python}" train.py env=franka_pick_place sampler=cebp preset=paper \
+  rollouts_per_cycle=$((100 / steps)) "${length[@]}" epochs=50 seed=0 resume=true "$@"
