@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Redraws the comparison's figures in docs/results/comparison/ from the committed CSVs and prints the
-# verdict table of docs/results.md (IQM [95% CI] and P(> her), rliable's conventions).
+# Redraws the comparison's figures in docs/results/comparison/ (and the Franka training curve in
+# docs/results/sim2real/) from the committed CSVs and prints the verdict table of docs/results.md
+# (IQM [95% CI] and P(> her), rliable's conventions).
 # Usage: bash scripts/redraw_results.sh [-h]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,4p' "$0" | cut -c3-; exit 0; fi
+if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,5p' "$0" | cut -c3-; exit 0; fi
 python=${PYTHON:-.venv/bin/python}
 results=docs/results/comparison
 plot() { "$python" -m torchrl_cebp.plot "$@" 2> >(grep -v AdroitHand >&2); }
@@ -20,3 +21,7 @@ plot "$results" --panels "${robot_a[@]}" --reference docs/results/paper_fig2.csv
   --table 5 10 15 20 --improvement-at 5 10 15 20
 plot "$results" --metric priority_ess_fraction --log-y --out "$results/priority_ess_fraction.png"
 plot "$results" --metric is_weight_mean --log-y --out "$results/is_weight_mean.png"
+# The Franka training (issue 29): cebp/paper is the first shipped run (before the env fixes of
+# docs/results/sim2real/diagnosis.md), cebp/paper-per_worker the retrains, with 100- and 50-step episodes.
+plot docs/results/sim2real/training --panels franka_pick_place-standard franka_pick_place-standard-T50 \
+  --out docs/results/sim2real/test_success.png --title "Franka pick-and-place in simulation, test success over 80 episodes"
