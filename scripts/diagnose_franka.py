@@ -17,6 +17,7 @@ Progress goes to stdout as it runs; the figures are printed together at the end.
 
 Example:
     $ MUJOCO_GL=osmesa python scripts/diagnose_franka.py --placements 50
+    $ MUJOCO_GL=osmesa python scripts/diagnose_franka.py --only-policy --policy runs/.../best_policy.pt --placements 40
 """
 
 from __future__ import annotations
@@ -353,7 +354,13 @@ def main() -> None:
     parser.add_argument("--grid", type=int, default=5, help="points per axis of the goal-space reach grid (default 5)")
     parser.add_argument("--policy", default=str(SHIPPED_POLICY),
                         help="a trained Franka policy file, or 'none' (default: the shipped one)")
+    parser.add_argument("--only-policy", action="store_true",
+                        help="only the policy's figures, e.g. to follow a training run (--placements episodes)")
     args = parser.parse_args()
+    if args.only_policy:
+        env = FrankaPickPlaceEnv()
+        print_policy(args.policy, policy_episodes(env, args.policy, args.seed, args.placements), env.max_episode_steps)
+        return
     start = time.perf_counter()
     envs = make_envs()
     franka = envs["franka"]
@@ -386,11 +393,7 @@ def main() -> None:
     print("schedule: composing conf/", flush=True)
     schedule = schedules()
 
-    episodes: list[PolicyEpisode] = []
-    if args.policy != "none":
-        print(f"policy: {os.path.relpath(args.policy)}, {args.placements} episodes", flush=True)
-        policy = load_policy(args.policy)
-        episodes = [run_policy(franka, policy, args.seed + k) for k in range(args.placements)]
+    episodes = [] if args.policy == "none" else policy_episodes(franka, args.policy, args.seed, args.placements)
 
     print(f"\n======== figures ({time.perf_counter() - start:.0f} s) ========")
     print("\n-- physics: Franka against Fetch PickAndPlace")
@@ -422,18 +425,29 @@ def main() -> None:
     print("\n-- training schedule (conf/config.yaml + conf/preset/paper.yaml)")
     print(table(schedule))
     if episodes:
-        air = [e for e in episodes if e.air_goal]
-        ground = [e for e in episodes if not e.air_goal]
-        print(f"\n-- policy {os.path.relpath(args.policy)}")
-        print(f"  success: table goals {fraction(e.success for e in ground)}, "
-              f"air goals {fraction(e.success for e in air)}")
-        print(f"  grasped and lifted the cube (both pads touching, 2 cm up): table goals "
-              f"{fraction(e.grasped for e in ground)}, air goals {fraction(e.grasped for e in air)}")
-        print(f"  episodes commanding a move out of the workspace box "
-              f"{fraction(e.clamped_steps > 0 for e in episodes)}, "
-              f"steps {sum(e.clamped_steps for e in episodes)} of {len(episodes) * franka.max_episode_steps}")
-        print(f"  cube knocked off the table {fraction(e.cube_off_table for e in episodes)}; mean gripper action "
-              f"{np.mean([e.mean_gripper for e in episodes]):+.2f} (-1 closes, +1 opens)")
+        print_policy(args.policy, episodes, franka.max_episode_steps)
+
+
+def policy_episodes(env: FrankaPickPlaceEnv, source: str, seed: int, episodes: int) -> list[PolicyEpisode]:
+    print(f"policy: {os.path.relpath(source)}, {episodes} episodes", flush=True)
+    policy = load_policy(source)
+    return [run_policy(env, policy, seed + k) for k in range(episodes)]
+
+
+def print_policy(source: str, episodes: list[PolicyEpisode], episode_steps: int) -> None:
+    """The policy's figures: success and grasps on table and air goals, moves out of the box, the gripper."""
+    air = [e for e in episodes if e.air_goal]
+    ground = [e for e in episodes if not e.air_goal]
+    print(f"\n-- policy {os.path.relpath(source)}")
+    print(f"  success: table goals {fraction(e.success for e in ground)}, "
+          f"air goals {fraction(e.success for e in air)}")
+    print(f"  grasped and lifted the cube (both pads touching, 2 cm up): table goals "
+          f"{fraction(e.grasped for e in ground)}, air goals {fraction(e.grasped for e in air)}")
+    print(f"  episodes commanding a move out of the workspace box "
+          f"{fraction(e.clamped_steps > 0 for e in episodes)}, "
+          f"steps {sum(e.clamped_steps for e in episodes)} of {len(episodes) * episode_steps}")
+    print(f"  cube knocked off the table {fraction(e.cube_off_table for e in episodes)}; mean gripper action "
+          f"{np.mean([e.mean_gripper for e in episodes]):+.2f} (-1 closes, +1 opens)")
 
 
 if __name__ == "__main__":
