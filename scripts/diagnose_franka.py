@@ -11,13 +11,15 @@ PickAndPlace with touch pads, standard goals: the one the paper's HER learns to 
   * observation: what it tells the policy about the grip, against Fetch's;
   * schedule: ``gamma = 1 - 1/T`` and updates per env step of the Franka config against Fetch's at the paper's scale;
   * a policy (``--policy``, the shipped one by default; ``none`` skips it): success on table and air goals, how often
-    it commands a move out of the workspace box, whether it grasps.
+    it commands a move out of the workspace box, whether it grasps;
+  * with ``--replay RUN_DIR`` instead: how often a training run's exploration lifted the cube, epoch by epoch.
 
 Progress goes to stdout as it runs; the figures are printed together at the end.
 
 Example:
     $ MUJOCO_GL=osmesa python scripts/diagnose_franka.py --placements 50
     $ MUJOCO_GL=osmesa python scripts/diagnose_franka.py --only-policy --policy runs/.../best_policy.pt --placements 40
+    $ python scripts/diagnose_franka.py --replay runs/franka_pick_place-standard/cebp/paper-per_worker/seed0
 """
 
 from __future__ import annotations
@@ -34,13 +36,15 @@ os.environ.setdefault("MUJOCO_GL", "osmesa")
 import numpy as np  # noqa: E402
 import torch  # noqa: E402  (torchrl_cebp imports tensordict before mujoco)
 from hydra import compose, initialize_config_dir  # noqa: E402
+from omegaconf import OmegaConf  # noqa: E402
 from tensordict import TensorDict  # noqa: E402
 
 from torchrl_cebp.envs import FETCH_OBSERVATION as OBS  # noqa: E402
 from torchrl_cebp.envs import FrankaPickPlaceEnv, make_touch_fetch  # noqa: E402
 from torchrl_cebp.envs.franka import HAND_BODY, HAND_QUAT, FrankaLayout, Workspace  # noqa: E402
 from torchrl_cebp.sim2real import SHIPPED_POLICY  # noqa: E402
-from torchrl_cebp.training import load_policy  # noqa: E402
+from torchrl_cebp.training import load_checkpoint, load_policy  # noqa: E402
+from torchrl_cebp.training.checkpoint import stored_episodes  # noqa: E402
 from torchrl_cebp.training.builders import episodes_per_cycle  # noqa: E402
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -328,6 +332,26 @@ def run_policy(env: FrankaPickPlaceEnv, policy, seed: int) -> PolicyEpisode:
     )
 
 
+def print_replay_lifts(run_dir: str) -> None:
+    """Per epoch of a run's replay buffer (its checkpoint): how often exploration lifted the cube, and how high.
+
+    Works for any pick-and-place run, Fetch or Franka: lifted is 2 cm above where the episode began.
+    """
+    state = load_checkpoint(run_dir)
+    episodes = stored_episodes(state)
+    cfg = OmegaConf.create(state["config"])
+    per_epoch = cfg.cycles_per_epoch * episodes_per_cycle(cfg)
+    height = episodes["next", "achieved_goal"][..., 2] - episodes["achieved_goal"][:, :1, 2]
+    lifted = height > 0.02
+    pinched = lifted & (episodes["next", "touch"] > 0).all(-1)
+    print(f"\n-- exploration in {os.path.relpath(run_dir)}'s replay buffer ({len(episodes)} episodes, "
+          f"{per_epoch} per epoch): episodes that lifted the cube 2 cm, and with both pads touching it")
+    for first in range(0, len(episodes), per_epoch):
+        rows = slice(first, first + per_epoch)
+        print(f"  epoch {first // per_epoch:3d}: lifted {fraction(lifted[rows].any(1).tolist())}, "
+              f"both pads {fraction(pinched[rows].any(1).tolist())}, highest {float(height[rows].max()) * 100:.1f} cm")
+
+
 def fraction(flags) -> str:
     flags = list(flags)
     return f"{sum(flags)} of {len(flags)} ({sum(flags) / max(1, len(flags)):.2f})"
@@ -356,7 +380,12 @@ def main() -> None:
                         help="a trained Franka policy file, or 'none' (default: the shipped one)")
     parser.add_argument("--only-policy", action="store_true",
                         help="only the policy's figures, e.g. to follow a training run (--placements episodes)")
+    parser.add_argument("--replay", metavar="RUN_DIR",
+                        help="only how often a run's exploration lifted the cube, per epoch (from its checkpoint)")
     args = parser.parse_args()
+    if args.replay:
+        print_replay_lifts(args.replay)
+        return
     if args.only_policy:
         env = FrankaPickPlaceEnv()
         print_policy(args.policy, policy_episodes(env, args.policy, args.seed, args.placements), env.max_episode_steps)

@@ -47,6 +47,12 @@ def test_the_storage_state_keeps_the_stored_tensordict_under_its_key():
     )
 
 
+def test_the_buffer_state_keeps_the_storage_state_under_its_key():
+    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * T, ndim=2), dim_extend=0, batch_size=4)
+    rb.extend(make_episodes(2))
+    assert rb.state_dict()[_upstream.BUFFER_STORAGE_KEY].keys() == rb.storage.state_dict().keys()
+
+
 def test_the_stored_tensordict_is_what_the_storage_reads_and_writes():
     storage = LazyTensorStorage(10 * T, ndim=2)
     storage.set(torch.arange(2), make_episodes(2))

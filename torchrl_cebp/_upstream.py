@@ -36,6 +36,8 @@ def sampler_generator(sampler: Sampler) -> torch.Generator | None:
 # The key under which ``TensorStorage.state_dict`` keeps its stored tensordict's state; the episode storage
 # saves only the filled rows there, so that a checkpoint grows with the stored episodes.
 STORAGE_STATE_KEY = "_storage"
+# The key under which ``ReplayBuffer.state_dict`` keeps its storage's state (a checkpoint's ``"replay"``).
+BUFFER_STORAGE_KEY = "_storage"
 
 
 def unchecked_tensordict(source: dict, batch_size: torch.Size, device: torch.device | None) -> TensorDict:

@@ -20,7 +20,7 @@ from torchrl_cebp.training.config import check_same_run, env_label, warn_if_bf16
 from torchrl_cebp.training.builders import (
     TaskDims, derive_seed, episode_steps, make_agent, make_env, make_replay, make_sampler, make_training_collector,
 )
-from torchrl_cebp.training.checkpoint import BEST_POLICY_NAME, BestPolicy, CHECKPOINT_NAME, POLICY_NAME
+from torchrl_cebp.training.checkpoint import BEST_POLICY_NAME, BestPolicy, stored_episodes, CHECKPOINT_NAME, POLICY_NAME
 from torchrl_cebp.training.evaluation import evaluate_success_rate
 from torchrl_cebp.training.trainer import TEST_STREAM, RelabelledTransitions
 
@@ -73,6 +73,15 @@ def test_best_policy_is_the_last_epoch_with_the_highest_success_across_a_resume(
     # a record is kept: a later, worse epoch does not replace it
     assert not BestPolicy(tmp_path).offer({**best, "epoch": 9, "test_success": best["test_success"] - 0.01})
     assert torch.load(tmp_path / BEST_POLICY_NAME, weights_only=True)["epoch"] == best["epoch"]
+
+
+def test_stored_episodes_are_the_checkpointed_buffers_whole_episodes(tmp_path):
+    train(config("sampler=her", "env=push", "epochs=2"), tmp_path)
+    episodes = stored_episodes(load_checkpoint(tmp_path))
+    assert episodes.shape == (int(rows(tmp_path / "progress.csv")[-1]["stored_episodes"]), 50)
+    # each row is one whole episode: it starts where the env reset it and its last step is the truncation
+    assert episodes["next", "truncated"][:, -1].all() and not episodes["next", "truncated"][:, :-1].any()
+    torch.testing.assert_close(episodes["next", "observation"][:, :-1], episodes["observation"][:, 1:])
 
 
 def test_policy_file_is_small_and_acts_as_the_checkpoint(tmp_path):

@@ -14,10 +14,12 @@ from typing import Any
 
 import torch
 from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDict
 from tensordict.nn import TensorDictSequential
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
 
+from torchrl_cebp import _upstream
 from torchrl_cebp.agents import ObsGoalNormalizer, make_actor
 from torchrl_cebp.training.builders import Agent
 from torchrl_cebp.training.config import ConfigError, check_same_run
@@ -56,6 +58,15 @@ def _save_atomically(state: dict[str, Any], path: Path) -> Path:
 def load_checkpoint(run_dir: str | Path, map_location: torch.device | str = "cpu") -> dict[str, Any]:
     """Loads ``run_dir/checkpoint.pt`` without unpickling code (``weights_only=True``)."""
     return torch.load(Path(run_dir) / CHECKPOINT_NAME, map_location=map_location, weights_only=True)
+
+
+def stored_episodes(state: dict[str, Any]) -> TensorDict:
+    """The episodes in a checkpoint's replay buffer, ``[episodes, T]``, in the order they were first written.
+
+    Until the buffer is full, row ``i`` is the ``i``-th episode collected; after that, writes wrap around.
+    """
+    storage = state["replay"][_upstream.BUFFER_STORAGE_KEY][_upstream.STORAGE_STATE_KEY]
+    return TensorDict().load_state_dict(storage, strict=False).unflatten_keys(".")
 
 
 def has_checkpoint(run_dir: str | Path) -> bool:
