@@ -338,7 +338,7 @@ def print_replay_lifts(run_dir: str) -> None:
     Works for any pick-and-place run, Fetch or Franka: lifted is 2 cm above where the episode began.
     """
     state = load_checkpoint(run_dir)
-    episodes = stored_episodes(state)
+    episodes, overwritten = stored_episodes(state)
     cfg = OmegaConf.create(state["config"])
     per_epoch = cfg.cycles_per_epoch * episodes_per_cycle(cfg)
     height = episodes["next", "achieved_goal"][..., 2] - episodes["achieved_goal"][:, :1, 2]
@@ -346,9 +346,10 @@ def print_replay_lifts(run_dir: str) -> None:
     pinched = lifted & (episodes["next", "touch"] > 0).all(-1)
     print(f"\n-- exploration in {os.path.relpath(run_dir)}'s replay buffer ({len(episodes)} episodes, "
           f"{per_epoch} per epoch): episodes that lifted the cube 2 cm, and with both pads touching it")
-    for first in range(0, len(episodes), per_epoch):
-        rows = slice(first, first + per_epoch)
-        print(f"  epoch {first // per_epoch:3d}: lifted {fraction(lifted[rows].any(1).tolist())}, "
+    # Epoch boundaries in the order collected; the oldest epoch may be partly overwritten.
+    for first in range(-(overwritten % per_epoch), len(episodes), per_epoch):
+        rows = slice(max(0, first), first + per_epoch)
+        print(f"  epoch {(overwritten + first) // per_epoch:3d}: lifted {fraction(lifted[rows].any(1).tolist())}, "
               f"both pads {fraction(pinched[rows].any(1).tolist())}, highest {float(height[rows].max()) * 100:.1f} cm")
 
 
@@ -378,11 +379,14 @@ def main() -> None:
     parser.add_argument("--grid", type=int, default=5, help="points per axis of the goal-space reach grid (default 5)")
     parser.add_argument("--policy", default=str(SHIPPED_POLICY),
                         help="a trained Franka policy file, or 'none' (default: the shipped one)")
-    parser.add_argument("--only-policy", action="store_true",
-                        help="only the policy's figures, e.g. to follow a training run (--placements episodes)")
-    parser.add_argument("--replay", metavar="RUN_DIR",
-                        help="only how often a run's exploration lifted the cube, per epoch (from its checkpoint)")
+    only = parser.add_mutually_exclusive_group()
+    only.add_argument("--only-policy", action="store_true",
+                      help="only the policy's figures, e.g. to follow a training run (--placements episodes)")
+    only.add_argument("--replay", metavar="RUN_DIR",
+                      help="only how often a run's exploration lifted the cube, per epoch (from its checkpoint)")
     args = parser.parse_args()
+    if args.only_policy and args.policy == "none":
+        parser.error("--only-policy needs a policy: --policy FILE (or the shipped one, the default)")
     if args.replay:
         print_replay_lifts(args.replay)
         return
@@ -458,6 +462,7 @@ def main() -> None:
 
 
 def policy_episodes(env: FrankaPickPlaceEnv, source: str, seed: int, episodes: int) -> list[PolicyEpisode]:
+    """``episodes`` episodes of the policy in ``source`` on ``env`` (the loop's 100 steps), placed by ``seed + k``."""
     print(f"policy: {os.path.relpath(source)}, {episodes} episodes", flush=True)
     policy = load_policy(source)
     return [run_policy(env, policy, seed + k) for k in range(episodes)]

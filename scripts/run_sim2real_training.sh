@@ -3,7 +3,7 @@
 # 800 env steps per cycle (Fetch's 0.05 updates per env step), 50 epochs, one core. EPISODE_STEPS=100 (the paper's
 # Franka episodes; one episode per worker per cycle) or 50 (Fetch PickAndPlace's, two per worker per cycle).
 # Resumable: rerunning continues after the last finished epoch. Usage: [EPISODE_STEPS=50] bash scripts/run_sim2real_training.sh [overrides]
-set -uo pipefail
+set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,5p' "$0" | cut -c3-; exit 0; fi
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 MUJOCO_GL=osmesa

@@ -53,6 +53,13 @@ def test_the_buffer_state_keeps_the_storage_state_under_its_key():
     assert rb.state_dict()[_upstream.BUFFER_STORAGE_KEY].keys() == rb.storage.state_dict().keys()
 
 
+def test_a_saved_buffer_names_its_writers_next_row_and_count():
+    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(3 * T, ndim=2), dim_extend=0, batch_size=4)
+    for _ in range(5):
+        rb.extend(make_episodes(1))
+    assert _upstream.round_robin_position(rb.state_dict()) == (2, 5)
+
+
 def test_the_stored_tensordict_is_what_the_storage_reads_and_writes():
     storage = LazyTensorStorage(10 * T, ndim=2)
     storage.set(torch.arange(2), make_episodes(2))

@@ -40,6 +40,16 @@ STORAGE_STATE_KEY = "_storage"
 BUFFER_STORAGE_KEY = "_storage"
 
 
+def round_robin_position(buffer_state: dict[str, Any]) -> tuple[int, int]:
+    """The next row a ``ReplayBuffer.state_dict``'s round-robin writer fills, and how many rows it has written.
+
+    The buffer keeps its writer's state under ``"_writer"``, and ``RoundRobinWriter`` names both numbers
+    privately; reading a saved buffer's episodes in the order they came needs them.
+    """
+    writer = buffer_state["_writer"]
+    return int(writer["_cursor"]), int(writer["_write_count"])
+
+
 def unchecked_tensordict(source: dict, batch_size: torch.Size, device: torch.device | None) -> TensorDict:
     """A TensorDict over entries already known to fit ``batch_size``, without the per-entry checks.
 

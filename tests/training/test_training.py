@@ -70,18 +70,37 @@ def test_best_policy_is_the_last_epoch_with_the_highest_success_across_a_resume(
     best = torch.load(tmp_path / BEST_POLICY_NAME, weights_only=True)
     assert best["test_success"] == pytest.approx(max(successes))
     assert best["epoch"] == max(epoch for epoch, success in enumerate(successes) if success == max(successes))
-    # a record is kept: a later, worse epoch does not replace it
-    assert not BestPolicy(tmp_path).offer({**best, "epoch": 9, "test_success": best["test_success"] - 0.01})
-    assert torch.load(tmp_path / BEST_POLICY_NAME, weights_only=True)["epoch"] == best["epoch"]
+
+
+def test_best_policy_keeps_its_record_across_a_resume_and_ties_replace_it(tmp_path):
+    def policy(epoch: int, success: float) -> dict:
+        return {"format": "torchrl_cebp.policy/1", "epoch": epoch, "test_success": success}
+
+    assert BestPolicy(tmp_path).offer(policy(0, 0.5))
+    resumed = BestPolicy(tmp_path, resume=True)
+    assert not resumed.offer(policy(1, 0.4)) and not resumed.offer(policy(2, float("nan")))
+    assert resumed.offer(policy(3, 0.5))  # a tie: the later policy has trained longer
+    assert torch.load(tmp_path / BEST_POLICY_NAME, weights_only=True)["epoch"] == 3
+    fresh = BestPolicy(tmp_path)  # a new run in the same folder: the old record is not its own
+    assert fresh.offer(policy(0, 0.1))
 
 
 def test_stored_episodes_are_the_checkpointed_buffers_whole_episodes(tmp_path):
     train(config("sampler=her", "env=push", "epochs=2"), tmp_path)
-    episodes = stored_episodes(load_checkpoint(tmp_path))
-    assert episodes.shape == (int(rows(tmp_path / "progress.csv")[-1]["stored_episodes"]), 50)
+    episodes, overwritten = stored_episodes(load_checkpoint(tmp_path))
+    assert overwritten == 0 and episodes.shape == (int(rows(tmp_path / "progress.csv")[-1]["stored_episodes"]), 50)
     # each row is one whole episode: it starts where the env reset it and its last step is the truncation
     assert episodes["next", "truncated"][:, -1].all() and not episodes["next", "truncated"][:, :-1].any()
     torch.testing.assert_close(episodes["next", "observation"][:, :-1], episodes["observation"][:, 1:])
+
+
+def test_stored_episodes_of_a_wrapped_buffer_are_oldest_first(tmp_path):
+    # 3 epochs of 2 cycles x 2 episodes: 12 episodes written into room for 8 (400 transitions of 50 steps)
+    train(config("sampler=her", "env=push", "epochs=3", "replay.capacity=400"), tmp_path)
+    episodes, overwritten = stored_episodes(load_checkpoint(tmp_path))
+    assert (len(episodes), overwritten) == (8, 4)
+    # the row each episode was written to: episodes 9-12 overwrote rows 0-3, so the oldest kept is row 4's
+    assert episodes["index"][:, 0].tolist() == [4, 5, 6, 7, 0, 1, 2, 3]
 
 
 def test_policy_file_is_small_and_acts_as_the_checkpoint(tmp_path):

@@ -60,13 +60,18 @@ def load_checkpoint(run_dir: str | Path, map_location: torch.device | str = "cpu
     return torch.load(Path(run_dir) / CHECKPOINT_NAME, map_location=map_location, weights_only=True)
 
 
-def stored_episodes(state: dict[str, Any]) -> TensorDict:
-    """The episodes in a checkpoint's replay buffer, ``[episodes, T]``, in the order they were first written.
+def stored_episodes(state: dict[str, Any]) -> tuple[TensorDict, int]:
+    """The episodes in a checkpoint's replay buffer, ``[episodes, T]``, oldest first, and how many came before them.
 
-    Until the buffer is full, row ``i`` is the ``i``-th episode collected; after that, writes wrap around.
+    Once the buffer is full, new episodes overwrite the oldest; the second number counts those overwritten, so
+    that episode ``i`` of the result was the ``(i + second)``-th collected.
     """
     storage = state["replay"][_upstream.BUFFER_STORAGE_KEY][_upstream.STORAGE_STATE_KEY]
-    return TensorDict().load_state_dict(storage, strict=False).unflatten_keys(".")
+    episodes = TensorDict().load_state_dict(storage, strict=False).unflatten_keys(".")
+    next_row, written = _upstream.round_robin_position(state["replay"])
+    if written > len(episodes):  # wrapped: the oldest episode is in the row the writer fills next
+        episodes = episodes[torch.arange(next_row, next_row + len(episodes)) % len(episodes)]
+    return episodes, written - len(episodes)
 
 
 def has_checkpoint(run_dir: str | Path) -> bool:
@@ -129,10 +134,12 @@ def set_rng_state(state: dict[str, Any]) -> None:
         torch.cuda.set_rng_state_all(state["cuda"])
 
 
-def policy_state(cfg: DictConfig, agent: Agent, **record: int | float) -> dict[str, Any]:
+def policy_state(
+    cfg: DictConfig, agent: Agent, epoch: int | None = None, test_success: float | None = None
+) -> dict[str, Any]:
     """What acting needs, as plain tensors: the actor, the observation normaliser, the hidden sizes and the env config.
 
-    ``record`` adds plain numbers about the policy, e.g. ``epoch=`` and ``test_success=``.
+    A trainer adds the ``epoch`` the policy finished and its ``test_success``.
 
     Example:
         >>> from omegaconf import OmegaConf
@@ -148,15 +155,17 @@ def policy_state(cfg: DictConfig, agent: Agent, **record: int | float) -> dict[s
         "hidden": list(cfg.agent.hidden),
         "actor": agent.policy[1].state_dict(),
         "normalizer": agent.normalizer.state_dict(),
-        **record,
+        **({} if epoch is None else {"epoch": epoch}),
+        **({} if test_success is None else {"test_success": test_success}),
     }
 
 
 class BestPolicy:
     """Keeps a run's best policy in ``run_dir/best_policy.pt``: the last epoch whose test success is the highest.
 
-    What it has to beat is read back from the file, so a resumed run keeps comparing with the epochs before it.
-    Ties replace the file: the later policy has trained longer for the same score.
+    A resumed run (``resume=True``) reads back what it has to beat from the file, so it keeps comparing with the
+    epochs before it; a new run ignores a file left in its folder. Ties replace the file: the later policy has
+    trained longer for the same score.
 
     Example:
         >>> import tempfile
@@ -167,21 +176,21 @@ class BestPolicy:
         >>> agent = make_agent(cfg, TaskDims(25, 3, 4, 50))
         >>> with tempfile.TemporaryDirectory() as d:
         ...     best = BestPolicy(d)
-        ...     best.offer(policy_state(cfg, agent, epoch=0, test_success=0.4)), best.offer(policy_state(cfg, agent, epoch=1, test_success=0.3))
-        ...     BestPolicy(d).test_success
-        (True, False)
-        0.4
+        ...     first = best.offer(policy_state(cfg, agent, epoch=0, test_success=0.4))
+        ...     worse = best.offer(policy_state(cfg, agent, epoch=1, test_success=0.3))
+        ...     first, worse, BestPolicy(d, resume=True).test_success
+        (True, False, 0.4)
     """
 
-    def __init__(self, run_dir: str | Path) -> None:
+    def __init__(self, run_dir: str | Path, resume: bool = False) -> None:
         self.path = Path(run_dir) / BEST_POLICY_NAME
         self.test_success = -math.inf
-        if self.path.is_file():
+        if resume and self.path.is_file():
             self.test_success = float(torch.load(self.path, map_location="cpu", weights_only=True)["test_success"])
 
     def offer(self, state: dict[str, Any]) -> bool:
         """Writes ``state`` (a :func:`policy_state` with ``test_success``) if it scores at least the best so far."""
-        if state["test_success"] < self.test_success:
+        if not state["test_success"] >= self.test_success:  # a NaN score never becomes the best
             return False
         save_policy(state, self.path)
         self.test_success = float(state["test_success"])

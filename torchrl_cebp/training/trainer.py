@@ -204,7 +204,8 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     """Trains DDPG+HER as configured by ``cfg`` (see ``conf/config.yaml``); returns the CSV path.
 
     ``run_dir`` receives ``progress.csv`` (one row per epoch), ``checkpoint.pt`` and ``policy.pt``
-    (after each epoch), and ``best_policy.pt`` (the epoch with the highest test success so far). With ``cfg.resume`` the run continues after the checkpoint's epoch.
+    (after each epoch), and ``best_policy.pt`` (the epoch with the highest test success so far). With
+    ``cfg.resume`` the run continues after the checkpoint's epoch.
     """
     validate_config(cfg)
     torch.set_num_threads(cfg.threads)
@@ -225,7 +226,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     if resuming:  # after every part is built: building one may draw from the restored random streams
         state = load_checkpoint(run_dir, map_location=device)
         start_epoch, wall_before = restore_training_state(state, cfg, agent, optimizer, replay, learner.beta_scheduler)
-    best_policy = BestPolicy(run_dir)
+    best_policy = BestPolicy(run_dir, resume=resuming)
     log = EpochLog(run_dir, start_epoch, cfg.logger, labels={"replay": replay_layout(cfg), "her_strategy": cfg.replay.strategy})
     run_start = time.perf_counter()
 
@@ -252,10 +253,11 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
             # Above the runs' own thread count, something else shared the cores and inflated epoch_s.
             "load_avg": timings["load_avg"],
         })
-        save_checkpoint(training_state(epoch, wall_s, cfg, agent, optimizer, replay, learner.beta_scheduler), run_dir)
+        # The policy files first: a checkpoint then implies that they include its epoch.
         policy = policy_state(cfg, agent, epoch=epoch, test_success=success)
         save_policy(policy, run_dir)
         best_policy.offer(policy)
+        save_checkpoint(training_state(epoch, wall_s, cfg, agent, optimizer, replay, learner.beta_scheduler), run_dir)
         progress.set_postfix(success=f"{success:.3f}", steps_per_s=f"{env_steps / epoch_s:.0f}")
         tqdm.write(f"epoch {epoch:3d}  test success {success:.3f}  ({env_steps / epoch_s:.0f} env steps/s)")
 
