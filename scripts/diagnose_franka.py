@@ -42,14 +42,13 @@ from tensordict import TensorDict  # noqa: E402
 from torchrl_cebp.envs import FETCH_OBSERVATION as OBS  # noqa: E402
 from torchrl_cebp.envs import FrankaPickPlaceEnv, make_touch_fetch  # noqa: E402
 from torchrl_cebp.envs.franka import HAND_BODY, HAND_QUAT, FrankaLayout, Workspace  # noqa: E402
+from torchrl_cebp.envs.scripted import ACTION_SCALE, GraspAndLift, move_towards  # noqa: E402
 from torchrl_cebp.sim2real import SHIPPED_POLICY  # noqa: E402
 from torchrl_cebp.training import load_checkpoint, load_policy  # noqa: E402
 from torchrl_cebp.training.checkpoint import stored_episodes  # noqa: E402
 from torchrl_cebp.training.builders import episodes_per_cycle  # noqa: E402
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
-# The action scale of gymnasium-robotics' Fetch, which the Franka env reuses: an action of 1 asks for 5 cm.
-ACTION_SCALE = Workspace().max_step
 # gymnasium-robotics' Fetch draws goals in the air up to 0.45 m above the object's resting height.
 FETCH_AIR_HEIGHT = 0.45
 # Each env's pad geom and finger actuator, to read the physical parameters from.
@@ -67,47 +66,6 @@ def highest_goal_z(env) -> float:
     if isinstance(env, FrankaPickPlaceEnv):
         return env.layout.cube_centre_height + env.layout.target_height
     return env.height_offset + FETCH_AIR_HEIGHT
-
-
-def act(grip: np.ndarray, target: np.ndarray, gripper: float) -> np.ndarray:
-    """The move towards ``target`` at the policy's top speed: magnitude 1 per axis until within one step."""
-    return np.append(np.clip((target - grip) / ACTION_SCALE, -1.0, 1.0), gripper).astype(np.float32)
-
-
-class GraspAndLift:
-    """A scripted pick-and-place at the policy's top speed: over the cube, down, close, then carry to the goal.
-
-    It never lets go or grasps again once it carries, so a cube that slips out stays dropped.
-
-    Args:
-        hover: height above the cube to line up at.
-        tolerance: how close the grip must come to a waypoint.
-
-    Example:
-        >>> script = GraspAndLift()
-        >>> obs = np.zeros(OBS.size, np.float32); obs[OBS.object_position] = [0.5, 0.0, 0.025]
-        >>> script(obs, goal=np.array([0.5, 0.0, 0.4])).tolist()  # over the cube at top speed, fingers open
-        [1.0, 0.0, 1.0, 1.0]
-    """
-
-    def __init__(self, hover: float = 0.05, tolerance: float = 0.005) -> None:
-        self.hover, self.tolerance = hover, tolerance
-        self.phase, self._widths = "approach", []
-
-    def __call__(self, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        grip, cube, width = obs[OBS.gripper_position], obs[OBS.object_position], float(OBS.gripper_opening(obs))
-        above = cube + [0.0, 0.0, self.hover]
-        if self.phase == "approach" and np.linalg.norm(above - grip) < 2 * self.tolerance and width > 0.06:
-            self.phase = "descend"
-        if self.phase == "descend" and np.linalg.norm(cube - grip) < self.tolerance:
-            self.phase = "close"
-        if self.phase == "close":
-            self._widths.append(width)
-            if len(self._widths) > 2 and self._widths[-2] - width < 0.0005:  # the fingers have stopped on the cube
-                self.phase = "carry"
-        target, gripper = {"approach": (above, 1.0), "descend": (cube, 1.0), "close": (grip, -1.0),
-                           "carry": (goal, -1.0)}[self.phase]
-        return act(grip, target, gripper)
 
 
 @dataclass
@@ -242,7 +200,7 @@ def reach(env: FrankaPickPlaceEnv, target: np.ndarray, steps: int = 40) -> Reach
     above = np.array([*target[:2], max(target[2], 0.3)])
     for t in range(steps):
         waypoint = above if t < steps // 2 and np.linalg.norm(above[:2] - obs["observation"][:2]) > 0.005 else target
-        obs, *_ = env.step(act(obs["observation"][OBS.gripper_position], waypoint, 1.0))
+        obs, *_ = env.step(move_towards(obs["observation"][OBS.gripper_position], waypoint, 1.0))
         grips.append(obs["observation"][OBS.gripper_position].copy())
     last = np.array(grips[-6:])
     quat = env.data.body(HAND_BODY).xquat

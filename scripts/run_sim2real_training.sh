@@ -1,17 +1,20 @@
 #!/usr/bin/env bash
 # Issue 29's Franka pick-and-place training (docs/results/sim2real/diagnosis.md): CEBP at the paper's 8-worker scale,
-# 800 env steps per cycle (Fetch's 0.05 updates per env step), 50 epochs, one core. EPISODE_STEPS=100 (the paper's
-# Franka episodes; one episode per worker per cycle) or 50 (Fetch PickAndPlace's, two per worker per cycle).
-# Resumable: rerunning continues after the last finished epoch. Usage: [EPISODE_STEPS=50] bash scripts/run_sim2real_training.sh [overrides]
+# 800 env steps per cycle (Fetch's 0.05 updates per env step), 50 epochs, one core. EPISODE_STEPS=50 (default:
+# Fetch PickAndPlace's, two episodes per worker per cycle) or 100 (the paper's Franka episodes, one per worker);
+# GRASPED_START=0.5 (default: half the training episodes begin with the cube grasped, the HER paper's aid) or 0.
+# Resumable: rerunning continues after the last finished epoch.
+# Usage: [EPISODE_STEPS=50|100] [GRASPED_START=0.5] bash scripts/run_sim2real_training.sh [overrides]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,5p' "$0" | cut -c3-; exit 0; fi
+if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,7p' "$0" | cut -c3-; exit 0; fi
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 MUJOCO_GL=osmesa
-steps=${EPISODE_STEPS:-100}
+steps=${EPISODE_STEPS:-50}
 case "$steps" in
   100) length=() ;;  # the task's own length: the config (and the run folder) name none
   50) length=(env.episode_steps=50) ;;
   *) echo "EPISODE_STEPS=$steps: must be 100 or 50" >&2; exit 2 ;;
 esac
 exec "${PYTHON:-.venv/bin/python}" train.py env=franka_pick_place sampler=cebp preset=paper \
-  rollouts_per_cycle=$((100 / steps)) "${length[@]}" epochs=50 seed=0 resume=true "$@"
+  rollouts_per_cycle=$((100 / steps)) "${length[@]}" env.grasped_start="${GRASPED_START:-0.5}" \
+  epochs=50 seed=0 resume=true "$@"

@@ -115,6 +115,33 @@ def test_grasped_cube_survives_fast_random_moves(env):
     assert held >= 8, held
 
 
+def test_grasped_start_hands_over_the_cube_held_at_its_placement():
+    grasped, layout = FrankaPickPlaceEnv(grasped_start=1.0), FrankaLayout()
+    for seed in range(8):
+        obs, info = grasped.reset(seed=seed)
+        assert (info["touch"] > 0).all(), info["touch"]
+        assert np.linalg.norm(obs["observation"][6:9]) < 0.02  # the cube sits between the fingers
+        assert obs["observation"][5] == pytest.approx(layout.cube_centre_height, abs=5e-3)  # still on the table
+        assert np.abs(obs["observation"][3:5] - layout.table_centre).max() <= layout.obj_range + 1e-3
+    obs, _ = drive(grasped, obs, obs["observation"][:3] + [0, 0, 0.2], gripper=-1.0, steps=6)
+    assert obs["achieved_goal"][2] > layout.cube_centre_height + 0.15  # closing the gripper was all a lift needed
+
+
+def test_grasped_start_draws_the_share_asked_and_leaves_plain_resets_alone(env):
+    half = FrankaPickPlaceEnv(grasped_start=0.5)
+    held = [bool((half.reset(seed=seed)[1]["touch"] > 0).all()) for seed in range(40)]
+    assert 10 <= sum(held) <= 30, sum(held)
+    never = FrankaPickPlaceEnv(grasped_start=0.0)
+    for seed in range(3):  # no extra random draw: the placements and goals of every earlier run stay the same
+        np.testing.assert_array_equal(never.reset(seed=seed)[0]["observation"], env.reset(seed=seed)[0]["observation"])
+    with pytest.raises(ValueError, match="grasped_start=1.5: must be a probability"):
+        FrankaPickPlaceEnv(grasped_start=1.5)
+    from torchrl_cebp.envs import make_env
+
+    with pytest.raises(ValueError, match="only franka_pick_place has grasped starts; use 0 for 'push'"):
+        make_env("push", grasped_start=0.5)
+
+
 def test_hand_stays_in_the_workspace_box(env):
     # Unclamped, full-speed moves took the grip point past the table's edge (x = -0.19), below its top and 0.95 m up.
     box = env.layout.workspace

@@ -430,6 +430,40 @@ def test_a_checkpoint_from_before_env_episode_steps_resumes_at_the_tasks_own_len
         check_same_run(saved, config("env=franka_pick_place", "env.episode_steps=50"))
 
 
+def test_a_checkpoint_from_before_env_grasped_start_resumes_with_table_starts():
+    saved = OmegaConf.to_container(config("env=franka_pick_place"), resolve=True)
+    del saved["env"]["grasped_start"]
+    check_same_run(saved, config("env=franka_pick_place"))
+    with pytest.raises(ConfigError, match="grasped_start': 0.0.*grasped_start': 0.5"):
+        check_same_run(saved, config("env=franka_pick_place", "env.grasped_start=0.5"))
+
+
+def test_grasped_start_is_checked_and_names_the_run_folder():
+    franka = config("env=franka_pick_place", "env.episode_steps=50", "env.grasped_start=0.5")
+    validate_config(franka)
+    assert env_label(franka.env) == "franka_pick_place-standard-T50-grasped50"
+    assert env_label(config("env=franka_pick_place").env) == "franka_pick_place-standard"
+    with pytest.raises(ConfigError, match=r"env.grasped_start=1.5: must be a number in \[0.0, 1.0\]"):
+        validate_config(config("env=franka_pick_place", "env.grasped_start=1.5"))
+    with pytest.raises(ConfigError, match="env.grasped_start=0.5: only env=franka_pick_place has grasped starts"):
+        validate_config(config("env=push", "env.grasped_start=0.5"))
+
+
+def test_only_the_training_collector_starts_episodes_grasped():
+    cfg = config("env=franka_pick_place", "env.episode_steps=10", "env.grasped_start=1.0", "rollouts_per_cycle=2")
+    dims = TaskDims(25, 3, 4, 10)
+    batches = make_training_collector(cfg, make_agent(cfg, dims), dims)
+    try:
+        batches.request(seed=0)
+        episodes = batches.result()
+    finally:
+        batches.close()
+    assert (episodes["touch"][:, 0] > 0).all()  # both pads on the cube from the first step
+    test_env = make_env(cfg, 2)
+    assert (test_env.reset()["touch"] == 0).all()
+    test_env.close()
+
+
 def test_episode_steps_give_slide_and_the_franka_their_own_length_and_folder():
     cfg = config("+comparison=slide_standard")
     assert cfg.env.episode_steps == 70 and env_label(cfg.env) == "slide-standard-T70"

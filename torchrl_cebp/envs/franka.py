@@ -27,6 +27,8 @@ import numpy as np
 from gymnasium.utils import EzPickle
 from gymnasium_robotics.envs.fetch import MujocoFetchEnv
 
+from torchrl_cebp.envs.layout import FETCH_OBSERVATION as OBS
+from torchrl_cebp.envs.scripted import ACTION_SCALE, GraspAndLift
 from torchrl_cebp.envs.touch import TouchReporting, add_touch_pad
 
 __all__ = [
@@ -58,6 +60,8 @@ HOME_QPOS: tuple[float, ...] = (0.0, -0.085, 0.0, -2.3, 0.0, 0.646, 0.0)
 HAND_QUAT: tuple[float, ...] = (0.0, 0.92388, -0.382683, 0.0)
 # Grip point on the hand's axis: a grasped cube's centre, with the fingertips 2 cm lower (clear of the table).
 GRIP_OFFSET = 0.24
+# Env steps a grasped start may take: the scripted grasp needs 8-12 from the start pose to any placement.
+GRASP_STEP_LIMIT = 25
 # Inner pad of each finger (finger frame): the capsules' inner surface, from fingertip to knuckle.
 _PAD_HALF_SIZE = (0.02, 0.006, 0.0325)
 _PAD_POS = (0.0, 0.0, 0.0625)
@@ -82,7 +86,7 @@ class Workspace:
 
     low: tuple[float, float, float] = (0.3, -0.2, 0.01)
     high: tuple[float, float, float] = (0.65, 0.2, 0.48)
-    max_step: float = 0.05
+    max_step: float = ACTION_SCALE
 
     def clamp(self, position: np.ndarray, delta: np.ndarray) -> np.ndarray:
         """``delta`` limited to ``max_step`` per axis and so that ``position + delta`` stays in the box."""
@@ -222,8 +226,14 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
 
     ``info["touch"]`` (also ``env.touch``) is each finger pad's touch averaged over the physics substeps.
 
+    With ``grasped_start`` > 0 that fraction of resets hands over the cube already between the closed fingers, at
+    its sampled placement on the table (a scripted grasp, :class:`GraspAndLift`, run inside the reset): the HER
+    paper's aid for pick-and-place, which began half its training episodes from a state with the box grasped.
+    It is for training episodes only; tests and the Sim2Real loop start from the table.
+
     Args:
         layout: scene geometry and goal space.
+        grasped_start: probability that a reset starts with the cube grasped (default 0: never).
         scene_hook: called with the ``MjSpec`` before it is compiled, to add things (markers, cameras).
         **kwargs: ``render_mode``, ``width``, ``height`` as for gymnasium-robotics envs.
 
@@ -232,15 +242,22 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
         >>> obs, info = env.reset(seed=0)
         >>> obs["observation"].shape, info["touch"].shape, env.max_episode_steps
         ((25,), (2,), 100)
+        >>> _, info = FrankaPickPlaceEnv(grasped_start=1.0).reset(seed=0)
+        >>> bool((info["touch"] > 0).all())
+        True
     """
 
     def __init__(
         self,
         layout: FrankaLayout = FrankaLayout(),
         scene_hook: Callable[[mujoco.MjSpec], None] | None = None,
+        grasped_start: float = 0.0,
         **kwargs: Any,
     ) -> None:
+        if not 0.0 <= grasped_start <= 1.0:
+            raise ValueError(f"grasped_start={grasped_start!r}: must be a probability in [0, 1]")
         self.layout = layout
+        self.grasped_start = grasped_start
         self._scene_hook = scene_hook
         self.touch = np.zeros(2)
         self.max_episode_steps = layout.max_episode_steps
@@ -261,7 +278,7 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
             default_camera_config=_DEFAULT_CAMERA,
             **kwargs,
         )
-        EzPickle.__init__(self, layout=layout, scene_hook=scene_hook, **kwargs)
+        EzPickle.__init__(self, layout=layout, scene_hook=scene_hook, grasped_start=grasped_start, **kwargs)
 
     def _initialize_simulation(self) -> None:
         # As MujocoRobotEnv._initialize_simulation, but compiling the generated scene.
@@ -296,6 +313,25 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
             self._mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
         self.initial_gripper_xpos = self._utils.get_site_xpos(self.model, self.data, "robot0:grip").copy()
         self.height_offset = self._utils.get_site_xpos(self.model, self.data, "object0")[2]
+
+    def _reset_sim(self) -> bool:
+        super()._reset_sim()
+        # Drawn only when enabled, so that plain resets keep the placements they had before the option existed.
+        if self.grasped_start > 0 and self.np_random.uniform() < self.grasped_start:
+            return self._grasp_cube()
+        return True
+
+    def _grasp_cube(self) -> bool:
+        """Runs the scripted grasp until the fingers rest on the cube; False (the reset is redrawn) if it cannot."""
+        script = GraspAndLift()
+        for _ in range(GRASP_STEP_LIMIT):
+            observation = self._get_obs()["observation"]
+            action = script(observation, goal=observation[OBS.object_position])
+            if script.phase == "carry":
+                return True
+            self._set_action(action)
+            self._mujoco_step(action)
+        return False
 
     def _set_action(self, action: np.ndarray) -> None:
         # Fetch's composition (scaled displacement, gripper pair), but the hand orientation is pinned to

@@ -56,8 +56,12 @@ class RobotOptions:
         return cls(**{key: env[key] for key in ("control", "touch_ignores_table", "touch_in_observation") if key in env})
 
 
-def make_goal_env(task: str, goal_space: str = "standard", robot: RobotOptions = RobotOptions(), **kwargs):
+def make_goal_env(task: str, goal_space: str = "standard", robot: RobotOptions = RobotOptions(),
+                  grasped_start: float = 0.0, **kwargs):
     """The gymnasium touch-sensing goal env of any task, Fetch or Franka (``kwargs`` go to gymnasium-robotics).
+
+    ``grasped_start``: the fraction of resets that begin with the cube grasped (:class:`FrankaPickPlaceEnv`;
+    the Franka task only).
 
     Example:
         >>> make_goal_env("franka_pick_place").max_episode_steps
@@ -66,7 +70,9 @@ def make_goal_env(task: str, goal_space: str = "standard", robot: RobotOptions =
     if task == FRANKA_TASK:
         if robot != RobotOptions():
             raise ValueError(f"the Franka task has the mocap robot only (with its own touch pads); got {robot}")
-        return make_franka(goal_space, **kwargs)
+        return make_franka(goal_space, grasped_start=grasped_start, **kwargs)
+    if grasped_start:
+        raise ValueError(f"grasped_start={grasped_start!r}: only {FRANKA_TASK} has grasped starts; use 0 for {task!r}")
     if task not in TASKS:
         raise ValueError(f"Unknown task {task!r}; valid tasks: {', '.join(ALL_TASKS)}")
     return make_touch_fetch(task, goal_space, **asdict(robot), **kwargs)
@@ -105,13 +111,14 @@ class TouchFetchEnv(EnvBase):
         render_size: tuple[int, int] | None = None,
         robot: RobotOptions = RobotOptions(),
         episode_steps: int | None = None,
+        grasped_start: float = 0.0,
     ) -> None:
         batch_size = torch.Size([] if num_envs is None else [num_envs])
         super().__init__(device=device, batch_size=batch_size)
         options = {} if render_size is None else {"render_mode": "rgb_array", "width": render_size[0], "height": render_size[1]}
         if episode_steps is not None:
             options["max_episode_steps"] = episode_steps
-        self._sims = [make_goal_env(task, goal_space, robot, **options) for _ in range(max(1, batch_size.numel()))]
+        self._sims = [make_goal_env(task, goal_space, robot, grasped_start, **options) for _ in range(max(1, batch_size.numel()))]
         first = self._sims[0]
         self.task = task
         self.goal_space = goal_space
@@ -240,6 +247,7 @@ def make_env(
     touch_ignores_table: bool = False,
     touch_in_observation: bool = False,
     episode_steps: int | None = None,
+    grasped_start: float = 0.0,
 ) -> EnvBase:
     """The TorchRL env of ``task`` (``pick_place``, ``push``, ``slide``, ``franka_pick_place``) under ``goal_space``.
 
@@ -247,7 +255,8 @@ def make_env(
     ``control``, ``touch_ignores_table``, ``touch_in_observation``); the Franka task only ``standard`` and mocap.
 
     ``episode_steps`` replaces the task's episode length (``None``: its goal space's, or the Franka's 100; the
-    Initial commit ran Slide with 70 steps on the standard goals, gymnasium's Slide has 50).
+    Initial commit ran Slide with 70 steps on the standard goals, gymnasium's Slide has 50). ``grasped_start``:
+    the fraction of episodes that begin with the cube grasped (the Franka task only; for training envs).
 
     ``num_envs=n`` gives one env of batch size ``[n]`` stepping ``n`` simulations (seeded
     ``seed``, ``seed + 1``, ...); ``render_size=(width, height)`` enables ``env.render()``. Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.
@@ -262,7 +271,7 @@ def make_env(
     """
     robot = RobotOptions(control, touch_ignores_table, touch_in_observation)
     env = TouchFetchEnv(task, goal_space, device=device, num_envs=num_envs, render_size=render_size, robot=robot,
-                        episode_steps=episode_steps)
+                        episode_steps=episode_steps, grasped_start=grasped_start)
     if seed is not None:
         env.set_seed(seed)
     return env
@@ -270,6 +279,8 @@ def make_env(
 
 def make_env_from_config(env: Mapping, **kwargs) -> EnvBase:
     """The env an env config names (``conf/env/*.yaml``, or a checkpoint's saved one); ``kwargs`` go to :func:`make_env`.
+
+    The config's ``grasped_start`` is not applied: it is for training envs, which pass it in ``kwargs``.
 
     Example:
         >>> make_env_from_config({"task": "push", "goal_space": "extended", "control": "joint"}).action_spec.shape

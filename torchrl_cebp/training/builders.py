@@ -39,15 +39,19 @@ def derive_seed(*keys: int) -> int:
     return int(np.random.SeedSequence(list(keys)).generate_state(1)[0] >> 1)
 
 
-def make_env(cfg: DictConfig, n_envs: int = 1, device: torch.device | str = "cpu") -> EnvBase:
+def make_env(cfg: DictConfig, n_envs: int = 1, device: torch.device | str = "cpu", training: bool = False) -> EnvBase:
     """``n_envs`` simulations of the configured task (``cfg.env``: task, goal space, robot) as one batched env.
+
+    ``training=True`` gives the exploration episodes' envs, which begin ``env.grasped_start`` of them with the cube
+    grasped; test envs always start from the table.
 
     Example:
         >>> from omegaconf import OmegaConf
         >>> make_env(OmegaConf.create({"env": {"task": "push", "goal_space": "standard"}}), 2).batch_size
         torch.Size([2])
     """
-    return make_env_from_config(cfg.env, device=device, num_envs=n_envs)
+    grasped_start = (cfg.env.get("grasped_start") or 0.0) if training else 0.0
+    return make_env_from_config(cfg.env, device=device, num_envs=n_envs, grasped_start=grasped_start)
 
 
 @dataclass(frozen=True)
@@ -194,7 +198,7 @@ def collector_processes(cfg: DictConfig) -> int:
 def make_training_collector(cfg: DictConfig, agent: Agent, dims: TaskDims) -> EpisodeBatches:
     """Exploration episodes of ``agent`` on CPU envs, a cycle's worth per batch (see :func:`make_collector`)."""
     collector = make_collector(
-        functools.partial(make_env, cfg), copy.deepcopy(agent.exploration), n_envs=episodes_per_cycle(cfg),
+        functools.partial(make_env, cfg, training=True), copy.deepcopy(agent.exploration), n_envs=episodes_per_cycle(cfg),
         episode_steps=dims.episode_steps, processes=collector_processes(cfg),
     )
     return EpisodeBatches(collector, agent.exploration)

@@ -25,7 +25,8 @@ if not OmegaConf.has_resolver("mul"):
 
 def env_label(env: DictConfig) -> str:
     """The run folder's env part: ``<task>-<goal_space>``, then the robot's label unless it is the default mocap Fetch,
-    then ``-T<steps>`` when the episode length is set (``env.episode_steps``).
+    then ``-T<steps>`` when the episode length is set (``env.episode_steps``), then ``-grasped<percent>`` when
+    training episodes start grasped (``env.grasped_start``).
 
     Examples:
         >>> from omegaconf import OmegaConf
@@ -36,10 +37,15 @@ def env_label(env: DictConfig) -> str:
         'push-standard'
         >>> env_label(OmegaConf.create({"task": "slide", "goal_space": "standard", "episode_steps": 70}))
         'slide-standard-T70'
+        >>> env_label(OmegaConf.create({"task": "franka_pick_place", "goal_space": "standard", "episode_steps": 50,
+        ...                             "grasped_start": 0.5}))
+        'franka_pick_place-standard-T50-grasped50'
     """
     label = RobotOptions.from_config(env).label
     steps = env.get("episode_steps")
-    return f"{env.task}-{env.goal_space}" + (f"-{label}" if label else "") + (f"-T{steps}" if steps is not None else "")
+    grasped = env.get("grasped_start") or 0.0
+    return (f"{env.task}-{env.goal_space}" + (f"-{label}" if label else "") + (f"-T{steps}" if steps is not None else "")
+            + (f"-grasped{round(100 * grasped):g}" if grasped else ""))
 
 
 # ``${env_label:${env}}`` names the run folders (conf/config.yaml), so that the robots do not share one.
@@ -128,6 +134,7 @@ def validate_config(cfg: DictConfig) -> None:
     check("overlap_collection", lambda v: isinstance(v, bool), "true or false")
     check("replay.per_worker", lambda v: isinstance(v, bool), "true or false")
     check("env.episode_steps", lambda v: v is None or (_is_int(v) and v > 1), "null or an integer above 1")
+    real_in("env.grasped_start", 0.0, 1.0)
     check("collector_processes", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
     real_in("replay.future_p", 0.0, 1.0)
     real_in("agent.tau", 0.0, 1.0, open_low=True)
@@ -147,7 +154,8 @@ def validate_config(cfg: DictConfig) -> None:
 
 def _franka_robot_errors(cfg: DictConfig) -> list[str]:
     if OmegaConf.select(cfg, "env.task") != FRANKA_TASK:
-        return []
+        grasped = OmegaConf.select(cfg, "env.grasped_start", default=0.0)
+        return [f"  env.grasped_start={grasped!r}: only env={FRANKA_TASK} has grasped starts; use 0"] if grasped else []
     return [
         f"  env.{key}={OmegaConf.select(cfg, f'env.{key}')!r}: the Franka task has the mocap robot "
         f"with its own pads only; use env.{key}={default!r}"
@@ -203,8 +211,11 @@ RUN_DEFINING_KEYS = (
 
 
 # What a checkpoint made before a run-defining key existed ran with: checkpoints before per-worker replay
-# merged the workers' episodes into one buffer, and those before env.episode_steps ran the task's own length.
-LEGACY_DEFAULTS: dict[tuple[str, str], object] = {("replay", "per_worker"): False, ("env", "episode_steps"): None}
+# merged the workers' episodes into one buffer, those before env.episode_steps ran the task's own length, and
+# those before env.grasped_start started every episode from the table.
+LEGACY_DEFAULTS: dict[tuple[str, str], object] = {
+    ("replay", "per_worker"): False, ("env", "episode_steps"): None, ("env", "grasped_start"): 0.0,
+}
 
 
 def with_legacy_defaults(saved: dict) -> dict:
