@@ -9,19 +9,22 @@ if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,5p' "$0" | cut
 python=${PYTHON:-.venv/bin/python}
 results=docs/results/comparison
 plot() { "$python" -m torchrl_cebp.plot "$@" 2> >(grep -v AdroitHand >&2); }
+present() { local dir=$1; shift; for panel in "$@"; do [ -d "$dir/$panel" ] && echo "$panel"; done; return 0; }
 plot "$results" --out "$results/test_success.png" --table 5 10 12 15 --improvement-at 10 12 15
 plot "$results/push-extended-joint-tableblind" --out "$results/push_released_robot.png" \
   --title "Push on robot B, the released code's: joint control, extended goals, table-blind pads"
 # The paper's Fig. 2 on its own setup (robot A: mocap Fetch, standard goals), the panels that have runs so far,
 # with the paper's HER, C-Energy and CPER values (docs/results/paper_fig2.csv, ORIGINAL_CODE.md §6) as markers.
-robot_a=()
-for panel in pick_place-standard push-standard slide-standard-T70; do [ -d "$results/$panel" ] && robot_a+=("$panel"); done
+mapfile -t robot_a < <(present "$results" pick_place-standard push-standard slide-standard-T70)
 plot "$results" --panels "${robot_a[@]}" --reference docs/results/paper_fig2.csv --out "$results/robot_a_fig2.png" \
   --title "The paper's Fig. 2 setup (robot A: mocap Fetch, standard goals); markers: the paper's curves" \
   --table 5 10 15 20 --improvement-at 5 10 15 20
 plot "$results" --metric priority_ess_fraction --log-y --out "$results/priority_ess_fraction.png"
 plot "$results" --metric is_weight_mean --log-y --out "$results/is_weight_mean.png"
 # The Franka training (issue 29): cebp/paper is the first shipped run (before the env fixes of
-# docs/results/sim2real/diagnosis.md), cebp/paper-per_worker the retrains, with 100- and 50-step episodes.
-plot docs/results/sim2real/training --panels franka_pick_place-standard franka_pick_place-standard-T50 \
+# docs/results/sim2real/diagnosis.md), cebp/paper-per_worker the retrains, with 100- and 50-step episodes, and
+# 50-step episodes with half the training episodes started grasped (-grasped50), the panels that have runs so far.
+mapfile -t franka < <(present docs/results/sim2real/training \
+  franka_pick_place-standard franka_pick_place-standard-T50 franka_pick_place-standard-T50-grasped50)
+plot docs/results/sim2real/training --panels "${franka[@]}" \
   --out docs/results/sim2real/test_success.png --title "Franka pick-and-place in simulation, test success over 80 episodes"
