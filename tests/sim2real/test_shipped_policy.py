@@ -33,9 +33,6 @@ def test_run_uses_the_shipped_policy_by_default():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 16's bar, not reached yet: the shipped policy stopped at about 0.5-0.6 "
-                   "test success (docs/results.md, Sim2Real); strict, so a policy that reaches it makes this fail until the "
-                   "marker goes")
 def test_shipped_policy_succeeds_through_the_camera_loop():
     report = run(parse_args(["run", "backend=sim", "episodes=10"])[1])
     assert report["camera_loop_success"] >= 0.8
