@@ -34,5 +34,8 @@ def test_run_uses_the_shipped_policy_by_default():
 
 @pytest.mark.slow
 def test_shipped_policy_succeeds_through_the_camera_loop():
-    report = run(parse_args(["run", "backend=sim", "episodes=10"])[1])
-    assert report["camera_loop_success"] >= 0.8
+    # Two cameras, the setup the README recommends: the loop's own score and the twin's true cube agree.
+    report = run(parse_args(["run", "backend=sim", "episodes=10", "side_camera=true"])[1])
+    assert report["camera_loop_success"] >= 0.8 and report["true_success"] >= 0.8
+    # One camera, the paper's: the policy still places the cube, though the camera may lose it under the hand.
+    assert run(parse_args(["run", "backend=sim", "episodes=10"])[1])["true_success"] >= 0.8
