@@ -293,22 +293,28 @@ def run_policy(env: FrankaPickPlaceEnv, policy, seed: int) -> PolicyEpisode:
 def print_replay_lifts(run_dir: str) -> None:
     """Per epoch of a run's replay buffer (its checkpoint): how often exploration lifted the cube, and how high.
 
-    Works for any pick-and-place run, Fetch or Franka: lifted is 2 cm above where the episode began.
+    Works for any pick-and-place run, Fetch or Franka: lifted is 2 cm above where the episode began. Episodes that
+    began with the cube grasped (``env.grasped_start``: both pads on it at the first step) are counted apart.
     """
     state = load_checkpoint(run_dir)
     episodes, overwritten = stored_episodes(state)
     cfg = OmegaConf.create(state["config"])
     per_epoch = cfg.cycles_per_epoch * episodes_per_cycle(cfg)
     height = episodes["next", "achieved_goal"][..., 2] - episodes["achieved_goal"][:, :1, 2]
+    began_grasped = (episodes["touch"][:, 0] > 0).all(-1)
     lifted = height > 0.02
     pinched = lifted & (episodes["next", "touch"] > 0).all(-1)
     print(f"\n-- exploration in {os.path.relpath(run_dir)}'s replay buffer ({len(episodes)} episodes, "
-          f"{per_epoch} per epoch): episodes that lifted the cube 2 cm, and with both pads touching it")
+          f"{per_epoch} per epoch): of the episodes begun on the table, those that lifted the cube 2 cm, and with "
+          "both pads touching it")
     # Epoch boundaries in the order collected; the oldest epoch may be partly overwritten.
     for first in range(-(overwritten % per_epoch), len(episodes), per_epoch):
         rows = slice(max(0, first), first + per_epoch)
-        print(f"  epoch {(overwritten + first) // per_epoch:3d}: lifted {fraction(lifted[rows].any(1).tolist())}, "
-              f"both pads {fraction(pinched[rows].any(1).tolist())}, highest {float(height[rows].max()) * 100:.1f} cm")
+        on_table = ~began_grasped[rows]
+        highest = float(height[rows][on_table].max()) if on_table.any() else float("nan")
+        print(f"  epoch {(overwritten + first) // per_epoch:3d}: lifted {fraction(lifted[rows][on_table].any(1).tolist())}, "
+              f"both pads {fraction(pinched[rows][on_table].any(1).tolist())}, highest {highest * 100:.1f} cm; "
+              f"{int(began_grasped[rows].sum())} more began grasped")
 
 
 def fraction(flags) -> str:
