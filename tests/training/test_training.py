@@ -422,20 +422,16 @@ def test_a_checkpoint_from_before_per_worker_replay_resumes_only_as_merged():
         check_same_run(saved, config("workers=2"))
 
 
-def test_a_checkpoint_from_before_env_episode_steps_resumes_at_the_tasks_own_length():
+@pytest.mark.parametrize("key, legacy, override", [
+    ("episode_steps", "None", "50"),  # before env.episode_steps: the task's own length
+    ("grasped_start", "0.0", "0.5"),  # before env.grasped_start: every episode from the table
+])
+def test_a_checkpoint_from_before_an_env_option_resumes_as_that_run_did(key, legacy, override):
     saved = OmegaConf.to_container(config("env=franka_pick_place"), resolve=True)
-    del saved["env"]["episode_steps"]
+    del saved["env"][key]
     check_same_run(saved, config("env=franka_pick_place"))
-    with pytest.raises(ConfigError, match="episode_steps': None.*episode_steps': 50"):
-        check_same_run(saved, config("env=franka_pick_place", "env.episode_steps=50"))
-
-
-def test_a_checkpoint_from_before_env_grasped_start_resumes_with_table_starts():
-    saved = OmegaConf.to_container(config("env=franka_pick_place"), resolve=True)
-    del saved["env"]["grasped_start"]
-    check_same_run(saved, config("env=franka_pick_place"))
-    with pytest.raises(ConfigError, match="grasped_start': 0.0.*grasped_start': 0.5"):
-        check_same_run(saved, config("env=franka_pick_place", "env.grasped_start=0.5"))
+    with pytest.raises(ConfigError, match=f"{key}': {legacy}.*{key}': {override}"):
+        check_same_run(saved, config("env=franka_pick_place", f"env.{key}={override}"))
 
 
 def test_grasped_start_is_checked_and_names_the_run_folder():

@@ -315,7 +315,8 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
         self.height_offset = self._utils.get_site_xpos(self.model, self.data, "object0")[2]
 
     def _reset_sim(self) -> bool:
-        super()._reset_sim()
+        if not super()._reset_sim():
+            return False
         # Drawn only when enabled, so that plain resets keep the placements they had before the option existed.
         if self.grasped_start > 0 and self.np_random.uniform() < self.grasped_start:
             return self._grasp_cube()

@@ -173,7 +173,7 @@ class MuJoCoTwinBackend(RobotBackend):
     @property
     def max_step(self) -> float:
         """The largest displacement one :meth:`move` can make (Fetch's action scale, which the env keeps)."""
-        return 0.05
+        return self.layout.workspace.max_step
 
     @property
     def calibration(self) -> TableCalibration:
