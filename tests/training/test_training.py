@@ -390,16 +390,40 @@ def test_per_resumes_its_beta(tmp_path):
         assert [r[key] for r in resumed] == [r[key] for r in straight]
 
 
-def test_code_version_is_the_commit_the_process_loaded(monkeypatch):
-    from torchrl_cebp.training import metrics
+def git_checkout(root):
+    def git(*args):
+        return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, check=True).stdout.strip()
 
-    heads = iter(["aaaaaaaaaaaa\n", "bbbbbbbbbbbb\n"])  # HEAD moves between two runs of one sweep process
-    monkeypatch.setattr(metrics.subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 0, next(heads), ""))
-    metrics.code_version.cache_clear()
-    try:
-        assert [metrics.code_version(), metrics.code_version()] == ["aaaaaaaaaaaa", "aaaaaaaaaaaa"]
-    finally:
-        metrics.code_version.cache_clear()
+    (root / "torchrl_cebp").mkdir(parents=True)
+    (root / "torchrl_cebp" / "core.py").write_text("x = 1\n")
+    (root / "README.md").write_text("notes\n")
+    git("init", "-q")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "first")
+    return git
+
+
+def test_code_version_is_the_commit_the_process_loaded(tmp_path):
+    from torchrl_cebp.training.metrics import code_version
+
+    git = git_checkout(tmp_path)
+    first = git("rev-parse", "--short=12", "HEAD")
+    assert code_version(tmp_path) == first
+    (tmp_path / "torchrl_cebp" / "core.py").write_text("x = 2\n")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qam", "second")  # HEAD moves mid-sweep
+    assert code_version(tmp_path) == first
+
+
+def test_code_version_is_dirty_only_when_the_code_a_run_executes_changed(tmp_path):
+    from torchrl_cebp.training.metrics import code_version
+
+    read_now = code_version.__wrapped__  # past the once-per-process cache
+    git = git_checkout(tmp_path)
+    commit = git("rev-parse", "--short=12", "HEAD")
+    (tmp_path / "README.md").write_text("results of the epoch that just finished\n")
+    assert read_now(tmp_path) == commit
+    (tmp_path / "torchrl_cebp" / "core.py").write_text("x = 2\n")
+    assert read_now(tmp_path) == f"{commit}+dirty"
 
 
 @pytest.mark.parametrize(("workers", "per_worker", "layout"), [(2, "true", "per_worker"), (2, "false", "merged"),

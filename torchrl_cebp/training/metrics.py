@@ -36,25 +36,36 @@ def make_logger(kind: str, run_dir: str | Path) -> Logger | None:
     return get_logger(kind, logger_name=str(run_dir / "logs"), experiment_name=run_dir.name, **extra)
 
 
-@functools.cache
-def code_version() -> str:
-    """The git commit of the package's checkout (``+dirty`` with uncommitted changes), or ``unknown`` outside git.
+# What a run executes: the package, its configs and its entry point. Edits anywhere else (the docs, or the result
+# rows that scripts/sync_results.sh commits while a sweep runs) leave a row's code clean.
+RUN_SOURCES = ("torchrl_cebp", "conf", "train.py", "pyproject.toml")
 
-    Read once per process: the runs of an in-process sweep keep running the code the process loaded,
-    whatever later commits move the checkout's HEAD to.
+
+@functools.cache
+def code_version(checkout: str | Path | None = None) -> str:
+    """The git commit of the package's checkout, or ``unknown`` outside git.
+
+    ``+dirty`` is appended when the files a run executes (:data:`RUN_SOURCES`) differ from that commit.
+    Read once per process (and ``checkout``): the runs of an in-process sweep keep running the code the
+    process loaded, whatever later commits move the checkout's HEAD to.
 
     Example:
         >>> len(code_version()) > 0
         True
     """
+    root = Path(checkout) if checkout is not None else Path(__file__).resolve().parents[2]
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=root, capture_output=True, text=True, timeout=10, check=True
+        ).stdout.strip()
+
     try:
-        out = subprocess.run(
-            ["git", "describe", "--always", "--dirty=+dirty", "--abbrev=12"],
-            cwd=Path(__file__).parent, capture_output=True, text=True, timeout=10, check=True,
-        )
+        commit = git("rev-parse", "--short=12", "HEAD")
+        changed = git("status", "--porcelain", "--", *RUN_SOURCES)
     except (OSError, subprocess.SubprocessError):
         return "unknown"
-    return out.stdout.strip() or "unknown"
+    return f"{commit}+dirty" if changed else commit
 
 
 class EpochCsv:
