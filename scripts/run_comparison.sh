@@ -13,7 +13,7 @@ export -f run
 extra="$*"
 # One line per run. Runs of a stage's seeds are queued, not swept, so a free slot takes the next stage's first run
 # instead of waiting for the stage's slowest seed.
-seeds() { local seed; for seed in 0 1 2; do echo "$* seed=$seed $extra"; done; }
+seeds() { local seed; for seed in 0 1 2; do echo "$* seed=$seed${extra:+ $extra}"; done; }
 # Issue 27's reruns are complete in docs/results/comparison/ (docs/results.md, twelfth sitting); their commands:
 #   train.py -m +comparison=push_standard seed=0,1,2 sampler=cebp_initial     (robot A, per worker)
 #   train.py -m +comparison=push_released seed=0,1,2 sampler=cebp_released    (robot B, per worker)
