@@ -1,0 +1,32 @@
+"""The shell scripts' run queues, read without training: PYTHON=echo prints each run's command line."""
+
+import os
+import subprocess
+from collections import Counter
+from pathlib import Path
+
+from hydra import compose, initialize_config_dir
+
+from torchrl_cebp.training.config import validate_config
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def queued_runs(*overrides: str) -> list[list[str]]:
+    out = subprocess.run(
+        ["bash", "scripts/run_comparison.sh", *overrides], cwd=REPO, capture_output=True, text=True, check=True,
+        env={**os.environ, "PYTHON": "echo", "JOBS": "2"},
+    )
+    return [line.split()[1:] for line in out.stdout.splitlines() if line.startswith("train.py")]
+
+
+def test_run_comparison_queues_one_valid_run_per_stage_and_seed():
+    runs = queued_runs()
+    assert sorted(queued_runs("epochs=1")) == sorted([*run, "epochs=1"] for run in runs)  # overrides reach every run
+    seeds = [next(o for o in run if o.startswith("seed=")) for run in runs]
+    assert all(sum(o.startswith("seed=") for o in run) == 1 for run in runs)
+    stages = Counter(" ".join(o for o in run if not o.startswith("seed=")) for run in runs)
+    assert set(stages.values()) == {3} and Counter(seeds) == {f"seed={s}": len(stages) for s in range(3)}
+    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
+        for run in runs:
+            validate_config(compose("config", overrides=run))  # every stage and sampler exists, every value is allowed
