@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # The open comparison on per-worker replay (issue 28: the rest of robot A's Fig. 2), one run per stage and seed, in
 # priority order, JOBS runs at a time (default 1; JOBS=2 uses both cores). Each run is resumable: rerunning this
-# script continues each run after its last finished epoch, and finished runs return at once. Commit epochs as they
-# finish with bash scripts/sync_results.sh --every 600. Usage: [JOBS=2] bash scripts/run_comparison.sh [Hydra overrides]
+# script continues each run after its last finished epoch, and finished runs return at once; a run whose CSV in
+# docs/results/comparison/ already holds all its epochs is skipped (scripts/pending_runs.py; SKIP_COMMITTED=0 runs it).
+# Commit epochs as they finish with bash scripts/sync_results.sh --every 600.
+# Usage: [JOBS=2] bash scripts/run_comparison.sh [Hydra overrides]
 set -uo pipefail
 cd "$(dirname "$0")/.."
-if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,5p' "$0" | cut -c3-; exit 0; fi
+if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,7p' "$0" | cut -c3-; exit 0; fi
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 MUJOCO_GL=osmesa
 export python=${PYTHON:-.venv/bin/python}
 run() { echo "[comparison] $(date -u +%FT%TZ) $*"; "$python" train.py "$@" || echo "[comparison] run failed: $*" >&2; }
@@ -13,7 +15,7 @@ export -f run
 extra="$*"
 # One line per run. Runs of a stage's seeds are queued, not swept, so a free slot takes the next stage's first run
 # instead of waiting for the stage's slowest seed.
-seeds() { local seed; for seed in 0 1 2; do echo "$* seed=$seed${extra:+ $extra}"; done; }
+seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${extra:+ $extra}"; done; }
 # Issue 27's reruns are complete in docs/results/comparison/ (docs/results.md, twelfth sitting); their commands:
 #   train.py -m +comparison=push_standard seed=0,1,2 sampler=cebp_initial     (robot A, per worker)
 #   train.py -m +comparison=push_released seed=0,1,2 sampler=cebp_released    (robot B, per worker)
@@ -23,11 +25,13 @@ seeds() { local seed; for seed in 0 1 2; do echo "$* seed=$seed${extra:+ $extra}
   # distribution either way (tests/replay/test_per_worker.py).
   seeds +comparison=pick_place_standard sampler=her replay.per_worker=false
   # CPER with its published draw (HindsightRelabel strategy "past"; docs/results.md); run folders end in -her_past.
-  seeds +comparison=pick_place_standard sampler=cper replay.strategy=past
+  # Seed 0 last: a new machine would repeat its 17 committed epochs before a new one.
+  SEED_ORDER="1 2 0" seeds +comparison=pick_place_standard sampler=cper replay.strategy=past
   seeds +comparison=push_standard sampler=cper replay.strategy=past          # 28.2 A Push: CPER
   seeds +comparison=slide_standard sampler=her                               # 28.3 A Slide, 70-step episodes
   seeds +comparison=slide_standard sampler=cebp_initial
   seeds +comparison=push_standard sampler=per                                # 28.4 A Push: the other baselines
   seeds +comparison=push_standard sampler=ebp
   seeds +comparison=push_standard sampler=mep
-} | xargs -P "${JOBS:-1}" -L 1 bash -c 'run "$@"' run
+} | if [ "${SKIP_COMMITTED:-1}" = 1 ]; then "${FILTER_PYTHON:-.venv/bin/python}" scripts/pending_runs.py; else cat; fi \
+  | xargs -P "${JOBS:-1}" -L 1 bash -c 'run "$@"' run

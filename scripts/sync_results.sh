@@ -17,8 +17,9 @@ sync_once() {
       runs/franka_pick_place-*) dest="docs/results/sim2real/training/${csv#runs/}" ;;
       *) dest="docs/results/comparison/${csv#runs/}" ;;
     esac
-    # A run restarted from epoch 0 (its checkpoint lost with an earlier machine) repeats the committed rows
-    # bit for bit: it replaces them only once it has caught up, so no committed epoch is ever withdrawn.
+    # A run restarted from epoch 0 (its checkpoint lost with an earlier machine) repeats the committed rows, bit for
+    # bit on the same CPU and within float noise on another: it replaces them only once it has caught up, so no
+    # committed epoch is ever withdrawn.
     if [ -f "$dest" ] && [ "$(wc -l < "$csv")" -lt "$(wc -l < "$dest")" ]; then
       continue
     fi

@@ -2,6 +2,7 @@
 
 import os
 import subprocess
+import sys
 from collections import Counter
 from pathlib import Path
 
@@ -15,7 +16,7 @@ REPO = Path(__file__).resolve().parents[1]
 def queued_runs(*overrides: str) -> list[list[str]]:
     out = subprocess.run(
         ["bash", "scripts/run_comparison.sh", *overrides], cwd=REPO, capture_output=True, text=True, check=True,
-        env={**os.environ, "PYTHON": "echo", "JOBS": "2"},
+        env={**os.environ, "PYTHON": "echo", "JOBS": "2", "SKIP_COMMITTED": "0"},
     )
     return [line.split()[1:] for line in out.stdout.splitlines() if line.startswith("train.py")]
 
@@ -30,3 +31,18 @@ def test_run_comparison_queues_one_valid_run_per_stage_and_seed():
     with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
         for run in runs:
             validate_config(compose("config", overrides=run))  # every stage and sampler exists, every value is allowed
+
+
+def test_pending_runs_skips_a_run_only_once_its_committed_csv_holds_all_its_epochs(tmp_path):
+    stage = "+comparison=pick_place_standard sampler=her replay.per_worker=false"  # 20 epochs
+    for seed, epochs in (0, 20), (1, 19):
+        csv = tmp_path / "pick_place-standard" / "her" / "paper" / f"seed{seed}" / "progress.csv"
+        csv.parent.mkdir(parents=True)
+        csv.write_text("epoch,test_success\n" + "".join(f"{epoch},0.5\n" for epoch in range(epochs)))
+    queue = "".join(f"{stage} seed={seed}\n" for seed in range(3))
+    out = subprocess.run(
+        [sys.executable, "scripts/pending_runs.py", "--committed", str(tmp_path)], cwd=REPO, input=queue,
+        capture_output=True, text=True, check=True,
+    )
+    assert out.stdout.splitlines() == [f"{stage} seed=1", f"{stage} seed=2"]
+    assert "skipped, 20 of 20 epochs committed: pick_place-standard/her/paper/seed0" in out.stderr
