@@ -231,7 +231,11 @@ def draw_sweep(
     sampler_colour = {label.split("/")[0]: c for label, c in colour.items()}
     values = np.concatenate([c for curves_by_label in groups.values() for cs in curves_by_label.values() for c in cs])
     fraction = bool(np.all((values >= 0) & (values <= 1)))
-    fig, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.8), squeeze=False, sharey=fraction)
+    # Legends sit below their panels, so that neither curves nor markers hide behind them.
+    entries = max(len(curves) + len(published.get(panel, {})) for panel, curves in groups.items())
+    fig, axes = plt.subplots(
+        1, len(groups), figsize=(5 * len(groups), 3.8 + 0.17 * entries), squeeze=False, sharey=fraction
+    )
     for ax, (panel, curves_by_label) in zip(axes[0], groups.items()):
         panel_title, short = panels[panel]
         for label, curves in sorted(curves_by_label.items()):
@@ -252,7 +256,7 @@ def draw_sweep(
         ax.set_ylabel(f"{metric.replace('_', ' ')} (IQM, 95% CI)")
         ax.yaxis.set_tick_params(labelleft=True)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16))
     if title is not None and len(groups) > 1:
         fig.suptitle(title)
     fig.tight_layout()
