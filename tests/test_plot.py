@@ -185,3 +185,25 @@ def test_panels_pick_and_order_the_tasks_and_published_values_are_marked_in_thei
         draw_sweep(tmp_path, panels=["slide-standard"])
     table = summary_table(tmp_path, [2], panels=["push-standard"])
     assert "push-standard" in table and "pick_place-standard" not in table
+
+
+def test_a_panel_without_runs_shows_the_published_values_alone_and_has_no_table_rows(tmp_path, capsys):
+    write_run(tmp_path / "push-standard/her/paper/seed0", [0.1, 0.2])
+    write_run(tmp_path / "push-standard/cebp_initial/paper/seed0", [0.0, 0.1])
+    reference = tmp_path / "paper.csv"
+    reference.write_text("panel,sampler,name,epoch,value\nslide-standard-T70,her,HER (paper),50,0.47\n"
+                         "slide-standard-T70,cebp_initial,C-Energy (paper),20,0.3\n")
+    fig = draw_sweep(tmp_path, panels=["push-standard", "slide-standard-T70"], reference=reference)
+    push, slide = fig.axes
+    assert slide.get_title() == "slide-standard-T70"
+    assert [text.get_text() for text in slide.texts] == ["no runs yet"]
+    markers = {line.get_label(): line for line in slide.get_lines()}
+    assert sorted(markers) == ["C-Energy (paper)", "HER (paper)"]
+    assert markers["HER (paper)"].get_color() == {l.get_label(): l for l in push.get_lines()}["her (1 seed)"].get_color()
+    assert slide.get_xlim()[0] == push.get_xlim()[0] == 0
+    with pytest.raises(KeyError, match=r"no runs for panel\(s\) \['slide-standard'\]"):
+        draw_sweep(tmp_path, panels=["push-standard", "slide-standard"], reference=reference)  # not published
+    main([str(tmp_path), "--panels", "push-standard", "slide-standard-T70", "--reference", str(reference),
+          "--out", str(tmp_path / "fig.png"), "--table", "2"])
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and "task" not in line]
+    assert len(rows) == 2 and all(row.startswith("| push-standard") for row in rows)

@@ -22,7 +22,7 @@ import argparse
 import csv
 import textwrap
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -164,14 +164,19 @@ def seed_count(n: int) -> str:
 REFERENCE_MARKERS = ("X", "*", "D", "P", "s", "^")
 
 
-def select_panels(groups: dict[str, dict], panels: Sequence[str] | None, root: Path) -> dict[str, dict]:
-    """``groups`` restricted to ``panels`` (task folders), in that order; all of them, sorted, for ``None``."""
+def select_panels(
+    groups: dict[str, dict], panels: Sequence[str] | None, root: Path, may_be_empty: Collection[str] = ()
+) -> dict[str, dict]:
+    """``groups`` restricted to ``panels`` (task folders), in that order; all of them, sorted, for ``None``.
+
+    A panel of ``may_be_empty`` (one with published values to mark) is kept without runs, as ``{}``.
+    """
     if panels is None:
         return dict(sorted(groups.items()))
-    missing = [panel for panel in panels if panel not in groups]
+    missing = [panel for panel in panels if panel not in groups and panel not in may_be_empty]
     if missing:
         raise KeyError(f"no runs for panel(s) {missing} under {root}; its panels: {sorted(groups)}")
-    return {panel: groups[panel] for panel in panels}
+    return {panel: groups.get(panel, {}) for panel in panels}
 
 
 def read_reference(path: str | Path) -> dict[str, dict[str, list[tuple[int, float]]]]:
@@ -216,14 +221,15 @@ def draw_sweep(
     ``log_y`` draws the metric on a log scale, for one that spans decades (IS weights, the effective
     fraction of the buffer drawn from).
     ``panels`` keeps those task folders only, in that order. ``reference`` (see :func:`read_reference`)
-    adds published values as markers, in the colour of the sampler they belong to.
+    adds published values as markers, in the colour of the sampler they belong to; a panel in ``panels``
+    with published values but no runs yet is drawn with the markers alone.
     """
     root = Path(root)
     groups = collect_sweep(root, metric)
     if not groups:
         raise FileNotFoundError(f"no {CSV_NAME} under {root}")
-    groups = select_panels(groups, panels, root)
     published = read_reference(reference) if reference is not None else {}
+    groups = select_panels(groups, panels, root, may_be_empty=published)
     panels = {panel: short_labels(panel, sorted(curves_by_label)) for panel, curves_by_label in groups.items()}
     palette = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     configurations = sorted({label for curves_by_label in groups.values() for label in curves_by_label})
@@ -243,6 +249,8 @@ def draw_sweep(
             epochs = np.arange(1, len(mean) + 1)
             ax.plot(epochs, mean, color=colour[label], label=f"{short[label]} ({seed_coverage(seeds)})")
             ax.fill_between(epochs, low, high, color=colour[label], alpha=0.2)
+        if not curves_by_label:
+            ax.text(0.5, 0.5, "no runs yet", transform=ax.transAxes, ha="center", va="center", color="grey")
         for marker, (key, points) in zip(REFERENCE_MARKERS, sorted(published.get(panel, {}).items())):
             sampler, _, name = key.partition("/")
             epochs, values = zip(*points)
@@ -251,6 +259,7 @@ def draw_sweep(
         ax.set_title(textwrap.fill(title if title is not None and len(groups) == 1 else panel_title, 50))
         if log_y:
             ax.set_yscale("log")
+        ax.set_xlim(left=0)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epochs trained")
         ax.set_ylabel(f"{metric.replace('_', ' ')} (IQM, 95% CI)")
@@ -420,8 +429,11 @@ def main(argv: list[str] | None = None) -> None:
             parser.error(f"{option} adds a column to --table: give --table too")
     print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title, args.log_y, args.panels, args.reference)}")
     if args.table:
+        # The figure has refused any panel without runs that the reference does not name; those left have no rows.
+        with_runs = collect_sweep(Path(args.root), args.metric)
+        panels = None if args.panels is None else [panel for panel in args.panels if panel in with_runs]
         print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline,
-                            args.panels))
+                            panels))
 
 
 if __name__ == "__main__":
