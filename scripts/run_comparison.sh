@@ -28,8 +28,9 @@ seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${
   # Seed 0 last: a new machine would repeat its 17 committed epochs before a new one.
   SEED_ORDER="1 2 0" seeds +comparison=pick_place_standard sampler=cper replay.strategy=past
   seeds +comparison=push_standard sampler=cper replay.strategy=past          # 28.2 A Push: CPER
-  seeds +comparison=slide_standard sampler=her                               # 28.3 A Slide, 70-step episodes
-  seeds +comparison=slide_standard sampler=cebp_initial
+  # 28.3 A Slide, 70-step episodes. Runs with committed epochs go last: a new machine repeats those before a new one.
+  SEED_ORDER="1 2 0" seeds +comparison=slide_standard sampler=cebp_initial
+  SEED_ORDER="2 0 1" seeds +comparison=slide_standard sampler=her
   seeds +comparison=push_standard sampler=per                                # 28.4 A Push: the other baselines
   seeds +comparison=push_standard sampler=ebp
   seeds +comparison=push_standard sampler=mep
