@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Redraws the comparison's figures in docs/results/comparison/ (and the Franka training curve in
-# docs/results/sim2real/) from the committed CSVs and prints the verdict table of docs/results.md
-# (IQM [95% CI] and P(> her), rliable's conventions).
+# docs/results/sim2real/) from the committed CSVs, prints the verdict tables of docs/results.md (IQM [95% CI] and
+# P(> her), rliable's conventions) and writes robot A's, one per task, to docs/results/comparison/robot_a_fig2.md.
 # Usage: bash scripts/redraw_results.sh [-h]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,11 +15,12 @@ plot "$results/push-extended-joint-tableblind" --out "$results/push_released_rob
   --title "Push on robot B, the released code's: joint control, extended goals, table-blind pads"
 # The paper's Fig. 2 on its own setup (robot A: mocap Fetch, standard goals), its three panels, with the paper's HER,
 # C-Energy and CPER values (docs/results/paper_fig2.csv, ORIGINAL_CODE.md §6) as markers; a panel without runs yet
-# shows the markers alone.
+# shows the markers alone. Its tables, one per task with the epochs the task's runs reached (Push's last is 12), go
+# to robot_a_fig2.md.
 plot "$results" --panels pick_place-standard push-standard slide-standard-T70 --reference docs/results/paper_fig2.csv \
   --out "$results/robot_a_fig2.png" \
   --title "The paper's Fig. 2 setup (robot A: mocap Fetch, standard goals); markers: the paper's curves" \
-  --table 5 10 15 20 --improvement-at 5 10 15 20
+  --table 5 10 12 15 20 --improvement-at 5 10 12 15 20 --tables-out "$results/robot_a_fig2.md"
 plot "$results" --metric priority_ess_fraction --log-y --out "$results/priority_ess_fraction.png"
 plot "$results" --metric is_weight_mean --log-y --out "$results/is_weight_mean.png"
 # The Franka training (issue 29): cebp/paper is the first shipped run (before the env fixes of

@@ -35,4 +35,4 @@ seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${
   seeds +comparison=push_standard sampler=ebp
   seeds +comparison=push_standard sampler=mep
 } | if [ "${SKIP_COMMITTED:-1}" = 1 ]; then "${FILTER_PYTHON:-.venv/bin/python}" scripts/pending_runs.py; else cat; fi \
-  | xargs -P "${JOBS:-1}" -L 1 bash -c 'run "$@"' run
+  | xargs -r -P "${JOBS:-1}" -L 1 bash -c 'run "$@"' run   # -r: an empty queue runs nothing, not a default train.py

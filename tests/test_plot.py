@@ -71,6 +71,41 @@ def test_a_configuration_keeps_its_colour_and_fractions_share_one_scale(tmp_path
     assert not unbounded[0].get_shared_y_axes().joined(*unbounded)
 
 
+def test_a_sampler_keeps_its_colour_across_variants_and_panels_and_its_variants_differ_in_style(tmp_path):
+    write_run(tmp_path / "push-standard/her/paper/seed0", [0.1, 0.2])
+    write_run(tmp_path / "push-standard/cebp_initial/paper/seed0", [0.0, 0.1])
+    write_run(tmp_path / "push-standard/cebp_initial/paper-per_worker/seed0", [0.0, 0.3])
+    write_run(tmp_path / "slide-standard-T70/her/paper-per_worker/seed0", [0.0, 0.1])
+    reference = tmp_path / "paper.csv"
+    reference.write_text("panel,sampler,name,epoch,value\nslide-standard-T70,her,HER (paper),50,0.47\n")
+    push, slide = draw_sweep(tmp_path, reference=reference).axes
+    lines = {line.get_label().split(" (")[0]: line for line in push.get_lines()}
+    slide_lines = {line.get_label(): line for line in slide.get_lines()}
+    her_colour = lines["her/paper"].get_color()
+    assert slide_lines["her/paper-per_worker (1 seed)"].get_color() == slide_lines["HER (paper)"].get_color() == her_colour
+    merged, per_worker = lines["cebp_initial/paper"], lines["cebp_initial/paper-per_worker"]
+    assert merged.get_color() == per_worker.get_color() != her_colour
+    assert merged.get_linestyle() != per_worker.get_linestyle()
+
+
+def test_tables_out_writes_one_table_per_task_with_the_epochs_its_runs_reached(tmp_path, capsys):
+    for seed in range(2):
+        write_run(tmp_path / f"push-standard/her/paper/seed{seed}", [0.1, 0.2])
+        write_run(tmp_path / f"push-standard/cebp/paper/seed{seed}", [0.2, 0.4])
+        write_run(tmp_path / f"slide-standard-T70/her/paper/seed{seed}", [0.0, 0.1, 0.2])
+    tables = tmp_path / "tables.md"
+    main([str(tmp_path), "--out", str(tmp_path / "fig.png"), "--table", "2", "3", "--improvement-at", "2", "3",
+          "--tables-out", str(tables)])
+    push, slide = tables.read_text().split("### ")[1:]
+    assert push.startswith("push-standard") and slide.startswith("slide-standard-T70")
+    assert "after 3 epochs" not in push and "P(> her) after 2 epochs" in push
+    assert "| cebp | 2 | 0.40 [0.40, 0.40] | 1.00 [1.00, 1.00] |" in push
+    assert "after 3 epochs" in slide and "P(> her) after 3 epochs" in slide
+    with pytest.raises(SystemExit):
+        main([str(tmp_path), "--tables-out", str(tables)])
+    assert "--tables-out goes with --table" in capsys.readouterr().err
+
+
 def test_iqm_band_over_the_seeds_that_reached_each_epoch():
     mean, low, high, seeds = iqm_band([np.array([0.0, 0.2, 0.3]), np.array([0.4, 0.6]), np.array([0.8, 1.0])])
     np.testing.assert_allclose(mean, [0.4, 0.6, 0.3])  # three seeds: the IQM trims none

@@ -33,6 +33,14 @@ def test_run_comparison_queues_one_valid_run_per_stage_and_seed():
             validate_config(compose("config", overrides=run))  # every stage and sampler exists, every value is allowed
 
 
+def test_run_comparison_runs_nothing_once_every_run_is_committed():
+    out = subprocess.run(
+        ["bash", "scripts/run_comparison.sh"], cwd=REPO, capture_output=True, text=True, check=True,
+        env={**os.environ, "PYTHON": "echo", "FILTER_PYTHON": "true"},  # a filter that passes no run on
+    )
+    assert "train.py" not in out.stdout and "[comparison]" not in out.stdout
+
+
 def test_pending_runs_skips_a_run_only_once_its_committed_csv_holds_all_its_epochs(tmp_path):
     stage = "+comparison=pick_place_standard sampler=her replay.per_worker=false"  # 20 epochs
     for seed, epochs in (0, 20), (1, 19):

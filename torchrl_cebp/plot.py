@@ -162,6 +162,36 @@ def seed_count(n: int) -> str:
 
 
 REFERENCE_MARKERS = ("X", "*", "D", "P", "s", "^")
+VARIANT_LINESTYLES = ("-", "--", ":", "-.")
+
+
+def sampler_colours(samplers: Collection[str]) -> dict[str, str]:
+    """One colour of matplotlib's cycle per sampler, in sorted order, so that a sampler keeps it in every panel.
+
+    Examples:
+        >>> colours = sampler_colours({"her", "cebp"})
+        >>> colours["cebp"] != colours["her"]
+        True
+    """
+    palette = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    return {sampler: palette[i % len(palette)] for i, sampler in enumerate(sorted(samplers))}
+
+
+def variant_linestyles(labels: Collection[str]) -> dict[str, str]:
+    """A line style per configuration label ``<sampler>/<variant>``: a sampler's variants, sorted, take
+    ``VARIANT_LINESTYLES`` in turn, so that one sampler's curves differ in style where they share a colour.
+
+    Examples:
+        >>> variant_linestyles(["her/paper", "cebp/paper", "cebp/paper-per_worker"])
+        {'cebp/paper': '-', 'cebp/paper-per_worker': '--', 'her/paper': '-'}
+    """
+    by_sampler: dict[str, list[str]] = defaultdict(list)
+    for label in sorted(labels):
+        by_sampler[label.split("/")[0]].append(label)
+    return {
+        label: VARIANT_LINESTYLES[i % len(VARIANT_LINESTYLES)]
+        for variants in by_sampler.values() for i, label in enumerate(variants)
+    }
 
 
 def select_panels(
@@ -214,8 +244,10 @@ def draw_sweep(
     The legend names how many seeds each stretch of a curve averages, so a tail that only some
     seeds reached does not read as all of them.
 
-    A configuration keeps its colour in every panel. A metric whose values all lie in [0, 1] (a success
-    rate, a fraction) is drawn on one shared scale, so that a task still near zero looks it.
+    A sampler keeps its colour in every panel, and a published curve takes its sampler's colour; a
+    sampler's variants in one panel (e.g. ``paper`` and ``paper-per_worker``) differ by line style.
+    A metric whose values all lie in [0, 1] (a success rate, a fraction) is drawn on one shared scale, so
+    that a task still near zero looks it.
     ``title`` names the figure; with a single panel it replaces the panel's own title (its folder name),
     which is what a sweep root without a ``<task>-<goal_space>`` level (e.g. ``runs/learning``) needs.
     ``log_y`` draws the metric on a log scale, for one that spans decades (IS weights, the effective
@@ -231,10 +263,9 @@ def draw_sweep(
     published = read_reference(reference) if reference is not None else {}
     groups = select_panels(groups, panels, root, may_be_empty=published)
     panels = {panel: short_labels(panel, sorted(curves_by_label)) for panel, curves_by_label in groups.items()}
-    palette = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    configurations = sorted({label for curves_by_label in groups.values() for label in curves_by_label})
-    colour = {label: palette[i % len(palette)] for i, label in enumerate(configurations)}
-    sampler_colour = {label.split("/")[0]: c for label, c in colour.items()}
+    run_samplers = {label.split("/")[0] for curves_by_label in groups.values() for label in curves_by_label}
+    published_samplers = {key.partition("/")[0] for curves in published.values() for key in curves}
+    sampler_colour = sampler_colours(run_samplers | published_samplers)
     values = np.concatenate([c for curves_by_label in groups.values() for cs in curves_by_label.values() for c in cs])
     fraction = bool(np.all((values >= 0) & (values <= 1)))
     # Legends sit below their panels, so that neither curves nor markers hide behind them.
@@ -244,18 +275,21 @@ def draw_sweep(
     )
     for ax, (panel, curves_by_label) in zip(axes[0], groups.items()):
         panel_title, short = panels[panel]
+        linestyle = variant_linestyles(curves_by_label)
         for label, curves in sorted(curves_by_label.items()):
             mean, low, high, seeds = iqm_band(curves)
             epochs = np.arange(1, len(mean) + 1)
-            ax.plot(epochs, mean, color=colour[label], label=f"{short[label]} ({seed_coverage(seeds)})")
-            ax.fill_between(epochs, low, high, color=colour[label], alpha=0.2)
+            colour = sampler_colour[label.split("/")[0]]
+            ax.plot(epochs, mean, color=colour, linestyle=linestyle[label],
+                    label=f"{short[label]} ({seed_coverage(seeds)})")
+            ax.fill_between(epochs, low, high, color=colour, alpha=0.2)
         if not curves_by_label:
             ax.text(0.5, 0.5, "no runs yet", transform=ax.transAxes, ha="center", va="center", color="grey")
         for marker, (key, points) in zip(REFERENCE_MARKERS, sorted(published.get(panel, {}).items())):
             sampler, _, name = key.partition("/")
             epochs, values = zip(*points)
             ax.plot(epochs, values, linestyle="none", marker=marker, markersize=8, markeredgecolor="black",
-                    color=sampler_colour.get(sampler, "grey"), label=name)
+                    color=sampler_colour[sampler], label=name)
         ax.set_title(textwrap.fill(title if title is not None and len(groups) == 1 else panel_title, 50))
         if log_y:
             ax.set_yscale("log")
@@ -398,6 +432,51 @@ def summary_table(
     return "\n".join(lines)
 
 
+def panel_tables(
+    root: str | Path,
+    after_epochs: list[int],
+    metric: str = "test_success",
+    improvement_at: Sequence[int] = (),
+    baseline: str = "her",
+    panels: Sequence[str] | None = None,
+) -> str:
+    """One :func:`summary_table` per panel (task folder), under a heading of its own, each with those of
+    ``after_epochs`` and ``improvement_at`` that some run of the panel reached: a task trained for 12 epochs
+    gets no empty column for 20. ``panels`` keeps those task folders, in that order (default: all, sorted).
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     for task, epochs in (("push-standard", 2), ("slide-standard", 3)):
+        ...         run = Path(d) / task / "her" / "paper" / "seed0"
+        ...         run.mkdir(parents=True)
+        ...         rows = [f"{e},0.5,60" for e in range(epochs)]
+        ...         _ = (run / CSV_NAME).write_text("\\n".join(["epoch,test_success,epoch_s", *rows]) + "\\n")
+        ...     print(panel_tables(d, [2, 3]))
+        ### push-standard
+        <BLANKLINE>
+        | task | configuration | seeds | after 2 epochs | training hours |
+        |---|---|---|---|---|
+        | push-standard | her/paper | 1 | 0.50 [0.50, 0.50] | 0.0 |
+        <BLANKLINE>
+        ### slide-standard
+        <BLANKLINE>
+        | task | configuration | seeds | after 2 epochs | after 3 epochs | training hours |
+        |---|---|---|---|---|---|
+        | slide-standard | her/paper | 1 | 0.50 [0.50, 0.50] | 0.50 [0.50, 0.50] | 0.1 |
+    """
+    curves = select_panels(collect_sweep(Path(root), metric), panels, Path(root))
+    sections = []
+    for panel, curves_by_label in curves.items():
+        longest = max(len(curve) for seeds in curves_by_label.values() for curve in seeds)
+        table = summary_table(
+            root, [n for n in after_epochs if n <= longest], metric,
+            improvement_at=[n for n in improvement_at if n <= longest], baseline=baseline, panels=[panel],
+        )
+        sections.append(f"### {panel}\n\n{table}")
+    return "\n\n".join(sections)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         description="Success curves of a sweep (IQM over seeds, 95% stratified-bootstrap band), and tables."
@@ -423,10 +502,16 @@ def main(argv: list[str] | None = None) -> None:
         help="with --table: a column of the probability of improvement over --baseline after each N epochs",
     )
     parser.add_argument("--baseline", default="her", help="the configuration --improvement-at compares with")
+    parser.add_argument(
+        "--tables-out", metavar="MD",
+        help="with --table: also write one table per task to this Markdown file, each with the epochs its runs reached",
+    )
     args = parser.parse_args(argv)
-    for option, value in (("--mean-over", args.mean_over), ("--improvement-at", args.improvement_at)):
+    for option, value in (
+        ("--mean-over", args.mean_over), ("--improvement-at", args.improvement_at), ("--tables-out", args.tables_out)
+    ):
         if value and not args.table:
-            parser.error(f"{option} adds a column to --table: give --table too")
+            parser.error(f"{option} goes with --table: give --table too")
     print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title, args.log_y, args.panels, args.reference)}")
     if args.table:
         # The figure has refused any panel without runs that the reference does not name; those left have no rows.
@@ -434,6 +519,10 @@ def main(argv: list[str] | None = None) -> None:
         panels = None if args.panels is None else [panel for panel in args.panels if panel in with_runs]
         print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline,
                             panels))
+        if args.tables_out:
+            tables = panel_tables(args.root, args.table, args.metric, args.improvement_at, args.baseline, panels)
+            Path(args.tables_out).write_text(tables + "\n")
+            print(f"wrote {args.tables_out}")
 
 
 if __name__ == "__main__":
