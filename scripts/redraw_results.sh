@@ -15,8 +15,8 @@ plot "$results/push-extended-joint-tableblind" --out "$results/push_released_rob
   --title "Push on robot B, the released code's: joint control, extended goals, table-blind pads"
 # The paper's Fig. 2 on its own setup (robot A: mocap Fetch, standard goals), its three panels, with the paper's HER,
 # C-Energy and CPER values (docs/results/paper_fig2.csv, ORIGINAL_CODE.md §6) as markers; a panel without runs yet
-# shows the markers alone. Its tables, one per task with the epochs the task's runs reached (Push's last is 12), go
-# to robot_a_fig2.md.
+# shows the markers alone. Its tables, one per task with the epochs some run of the task reached, go to
+# robot_a_fig2.md.
 plot "$results" --panels pick_place-standard push-standard slide-standard-T70 --reference docs/results/paper_fig2.csv \
   --out "$results/robot_a_fig2.png" \
   --title "The paper's Fig. 2 setup (robot A: mocap Fetch, standard goals); markers: the paper's curves" \

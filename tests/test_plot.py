@@ -59,7 +59,7 @@ def test_one_task_folder_as_root_is_one_panel_of_its_samplers(tmp_path, capsys):
     }
 
 
-def test_a_configuration_keeps_its_colour_and_fractions_share_one_scale(tmp_path):
+def test_a_sampler_keeps_its_colour_and_fractions_share_one_scale(tmp_path):
     write_run(tmp_path / "pick_place-extended/her/paper/seed0", [0.0, 0.01])
     write_run(tmp_path / "push-extended/cebp/paper/seed0", [0.1, 0.8])
     write_run(tmp_path / "push-extended/her/paper/seed0", [0.2, 0.9])
@@ -77,7 +77,8 @@ def test_a_sampler_keeps_its_colour_across_variants_and_panels_and_its_variants_
     write_run(tmp_path / "push-standard/cebp_initial/paper-per_worker/seed0", [0.0, 0.3])
     write_run(tmp_path / "slide-standard-T70/her/paper-per_worker/seed0", [0.0, 0.1])
     reference = tmp_path / "paper.csv"
-    reference.write_text("panel,sampler,name,epoch,value\nslide-standard-T70,her,HER (paper),50,0.47\n")
+    reference.write_text("panel,sampler,name,epoch,value\nslide-standard-T70,her,HER (paper),50,0.47\n"
+                         "slide-standard-T70,cper,CPER (paper),50,0.52\n")  # a sampler with no runs
     push, slide = draw_sweep(tmp_path, reference=reference).axes
     lines = {line.get_label().split(" (")[0]: line for line in push.get_lines()}
     slide_lines = {line.get_label(): line for line in slide.get_lines()}
@@ -86,6 +87,8 @@ def test_a_sampler_keeps_its_colour_across_variants_and_panels_and_its_variants_
     merged, per_worker = lines["cebp_initial/paper"], lines["cebp_initial/paper-per_worker"]
     assert merged.get_color() == per_worker.get_color() != her_colour
     assert merged.get_linestyle() != per_worker.get_linestyle()
+    cper = slide_lines["CPER (paper)"].get_color()
+    assert cper not in (her_colour, merged.get_color(), "grey")
 
 
 def test_tables_out_writes_one_table_per_task_with_the_epochs_its_runs_reached(tmp_path, capsys):
@@ -95,12 +98,13 @@ def test_tables_out_writes_one_table_per_task_with_the_epochs_its_runs_reached(t
         write_run(tmp_path / f"slide-standard-T70/her/paper/seed{seed}", [0.0, 0.1, 0.2])
     tables = tmp_path / "tables.md"
     main([str(tmp_path), "--out", str(tmp_path / "fig.png"), "--table", "2", "3", "--improvement-at", "2", "3",
-          "--tables-out", str(tables)])
+          "--mean-over", "1", "3", "--tables-out", str(tables)])
     push, slide = tables.read_text().split("### ")[1:]
     assert push.startswith("push-standard") and slide.startswith("slide-standard-T70")
     assert "after 3 epochs" not in push and "P(> her) after 2 epochs" in push
     assert "| cebp | 2 | 0.40 [0.40, 0.40] | 1.00 [1.00, 1.00] |" in push
     assert "after 3 epochs" in slide and "P(> her) after 3 epochs" in slide
+    assert "mean over epochs 1-3" in slide and "mean over" not in push
     with pytest.raises(SystemExit):
         main([str(tmp_path), "--tables-out", str(tables)])
     assert "--tables-out goes with --table" in capsys.readouterr().err

@@ -33,10 +33,13 @@ def test_run_comparison_queues_one_valid_run_per_stage_and_seed():
             validate_config(compose("config", overrides=run))  # every stage and sampler exists, every value is allowed
 
 
-def test_run_comparison_runs_nothing_once_every_run_is_committed():
+def test_run_comparison_runs_nothing_once_every_run_is_committed(tmp_path):
+    passes_none = tmp_path / "passes_none"  # stands for pending_runs.py when every run is committed
+    passes_none.write_text("#!/bin/sh\ncat >/dev/null\n")
+    passes_none.chmod(0o755)
     out = subprocess.run(
         ["bash", "scripts/run_comparison.sh"], cwd=REPO, capture_output=True, text=True, check=True,
-        env={**os.environ, "PYTHON": "echo", "FILTER_PYTHON": "true"},  # a filter that passes no run on
+        env={**os.environ, "PYTHON": "echo", "FILTER_PYTHON": str(passes_none), "SKIP_COMMITTED": "1"},
     )
     assert "train.py" not in out.stdout and "[comparison]" not in out.stdout
 

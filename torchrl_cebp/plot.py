@@ -165,6 +165,16 @@ REFERENCE_MARKERS = ("X", "*", "D", "P", "s", "^")
 VARIANT_LINESTYLES = ("-", "--", ":", "-.")
 
 
+def sampler_of(label: str) -> str:
+    """The sampler of a configuration label ``<sampler>/<variant>`` (or of a reference key ``<sampler>/<name>``).
+
+    Examples:
+        >>> sampler_of("cebp_initial/paper-per_worker")
+        'cebp_initial'
+    """
+    return label.split("/")[0]
+
+
 def sampler_colours(samplers: Collection[str]) -> dict[str, str]:
     """One colour of matplotlib's cycle per sampler, in sorted order, so that a sampler keeps it in every panel.
 
@@ -179,7 +189,8 @@ def sampler_colours(samplers: Collection[str]) -> dict[str, str]:
 
 def variant_linestyles(labels: Collection[str]) -> dict[str, str]:
     """A line style per configuration label ``<sampler>/<variant>``: a sampler's variants, sorted, take
-    ``VARIANT_LINESTYLES`` in turn, so that one sampler's curves differ in style where they share a colour.
+    ``VARIANT_LINESTYLES`` in turn, so that one sampler's curves differ in style where they share a colour
+    (a fifth variant repeats the first's style).
 
     Examples:
         >>> variant_linestyles(["her/paper", "cebp/paper", "cebp/paper-per_worker"])
@@ -187,7 +198,7 @@ def variant_linestyles(labels: Collection[str]) -> dict[str, str]:
     """
     by_sampler: dict[str, list[str]] = defaultdict(list)
     for label in sorted(labels):
-        by_sampler[label.split("/")[0]].append(label)
+        by_sampler[sampler_of(label)].append(label)
     return {
         label: VARIANT_LINESTYLES[i % len(VARIANT_LINESTYLES)]
         for variants in by_sampler.values() for i, label in enumerate(variants)
@@ -263,9 +274,10 @@ def draw_sweep(
     published = read_reference(reference) if reference is not None else {}
     groups = select_panels(groups, panels, root, may_be_empty=published)
     panels = {panel: short_labels(panel, sorted(curves_by_label)) for panel, curves_by_label in groups.items()}
-    run_samplers = {label.split("/")[0] for curves_by_label in groups.values() for label in curves_by_label}
-    published_samplers = {key.partition("/")[0] for curves in published.values() for key in curves}
-    sampler_colour = sampler_colours(run_samplers | published_samplers)
+    sampler_colour = sampler_colours(
+        {sampler_of(label) for panel, curves_by_label in groups.items()
+         for label in [*curves_by_label, *published.get(panel, {})]}
+    )
     values = np.concatenate([c for curves_by_label in groups.values() for cs in curves_by_label.values() for c in cs])
     fraction = bool(np.all((values >= 0) & (values <= 1)))
     # Legends sit below their panels, so that neither curves nor markers hide behind them.
@@ -279,7 +291,7 @@ def draw_sweep(
         for label, curves in sorted(curves_by_label.items()):
             mean, low, high, seeds = iqm_band(curves)
             epochs = np.arange(1, len(mean) + 1)
-            colour = sampler_colour[label.split("/")[0]]
+            colour = sampler_colour[sampler_of(label)]
             ax.plot(epochs, mean, color=colour, linestyle=linestyle[label],
                     label=f"{short[label]} ({seed_coverage(seeds)})")
             ax.fill_between(epochs, low, high, color=colour, alpha=0.2)
@@ -411,7 +423,7 @@ def summary_table(
 
     for panel, curves_by_label in values.items():
         title, short = short_labels(panel, sorted(curves_by_label))
-        baselines = [curves for label, curves in curves_by_label.items() if label.split("/")[0] == baseline]
+        baselines = [curves for label, curves in curves_by_label.items() if sampler_of(label) == baseline]
         for label, curves in sorted(curves_by_label.items()):
             cells = [title, short[label], str(len(curves))]
             for n in after_epochs:
@@ -436,13 +448,14 @@ def panel_tables(
     root: str | Path,
     after_epochs: list[int],
     metric: str = "test_success",
+    mean_over: tuple[int, int] | None = None,
     improvement_at: Sequence[int] = (),
     baseline: str = "her",
     panels: Sequence[str] | None = None,
 ) -> str:
     """One :func:`summary_table` per panel (task folder), under a heading of its own, each with those of
-    ``after_epochs`` and ``improvement_at`` that some run of the panel reached: a task trained for 12 epochs
-    gets no empty column for 20. ``panels`` keeps those task folders, in that order (default: all, sorted).
+    ``after_epochs`` and ``improvement_at`` that some run of the panel reached, and ``mean_over`` where one
+    reached its last epoch: a task trained for 12 epochs gets no empty column for 20. ``panels`` keeps those task folders, in that order (default: all, sorted).
 
     Examples:
         >>> import tempfile
@@ -471,6 +484,7 @@ def panel_tables(
         longest = max(len(curve) for seeds in curves_by_label.values() for curve in seeds)
         table = summary_table(
             root, [n for n in after_epochs if n <= longest], metric,
+            mean_over=mean_over if mean_over is not None and mean_over[1] <= longest else None,
             improvement_at=[n for n in improvement_at if n <= longest], baseline=baseline, panels=[panel],
         )
         sections.append(f"### {panel}\n\n{table}")
@@ -520,7 +534,9 @@ def main(argv: list[str] | None = None) -> None:
         print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline,
                             panels))
         if args.tables_out:
-            tables = panel_tables(args.root, args.table, args.metric, args.improvement_at, args.baseline, panels)
+            tables = panel_tables(
+                args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline, panels
+            )
             Path(args.tables_out).write_text(tables + "\n")
             print(f"wrote {args.tables_out}")
 
