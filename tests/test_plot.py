@@ -83,7 +83,8 @@ def test_a_sampler_keeps_its_colour_across_variants_and_panels_and_its_variants_
     lines = {line.get_label().split(" (")[0]: line for line in push.get_lines()}
     slide_lines = {line.get_label(): line for line in slide.get_lines()}
     her_colour = lines["her/paper"].get_color()
-    assert slide_lines["her/paper-per_worker (1 seed)"].get_color() == slide_lines["HER (paper)"].get_color() == her_colour
+    slide_her = slide_lines["her/paper-per_worker (1 seed)"]
+    assert slide_her.get_color() == slide_lines["HER (paper)"].get_color() == her_colour
     merged, per_worker = lines["cebp_initial/paper"], lines["cebp_initial/paper-per_worker"]
     assert merged.get_color() == per_worker.get_color() != her_colour
     assert merged.get_linestyle() != per_worker.get_linestyle()

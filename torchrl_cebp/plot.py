@@ -455,7 +455,8 @@ def panel_tables(
 ) -> str:
     """One :func:`summary_table` per panel (task folder), under a heading of its own, each with those of
     ``after_epochs`` and ``improvement_at`` that some run of the panel reached, and ``mean_over`` where one
-    reached its last epoch: a task trained for 12 epochs gets no empty column for 20. ``panels`` keeps those task folders, in that order (default: all, sorted).
+    reached its last epoch: a task trained for 12 epochs gets no empty column for 20. ``panels`` keeps
+    those task folders, in that order (default: all, sorted).
 
     Examples:
         >>> import tempfile
