@@ -184,3 +184,26 @@ def test_a_state_of_another_capacity_is_refused_with_the_capacity_it_needs(name,
             other.loads(tmp_path)
         else:
             other.load_state_dict(saved.state_dict())
+
+
+@pytest.mark.parametrize("how", ["load_state_dict", "loads"])
+def test_a_capacity_that_is_not_whole_episodes_resumes_and_wraps_as_before(how, tmp_path):
+    # 70-step Slide in 1e6 transitions: TorchRL rounds the rows up (here 4.5 rows of T give 5) on the first write.
+    capacity = 4 * T + T // 2
+
+    def buffer():
+        return make_replay_buffer(SAMPLERS["cebp_initial"](capacity), HindsightRelabel(sparse_reward), capacity=capacity)
+
+    saved = buffer()
+    saved.extend(labelled_episodes(4))
+    restored = buffer()
+    if how == "loads":
+        saved.dumps(tmp_path)
+        restored.loads(tmp_path)
+    else:
+        restored.load_state_dict(saved.state_dict())
+    assert restored.storage.max_size == saved.storage.max_size == 5 * T
+    for rb in (saved, restored):
+        rb.extend(labelled_episodes(3, first_id=4))  # rows 4, 0, 1: the restored buffer wraps where the saved one does
+        stored_ids = rb.storage[torch.arange(5)]["achieved_goal"][..., 0]
+        assert torch.equal(stored_ids, torch.tensor([5.0, 6, 2, 3, 4])[:, None].expand(5, T))

@@ -2,7 +2,7 @@
 from torchrl_cebp.replay.buffer import episode_storage, make_replay_buffer
 from torchrl_cebp.replay.episodes import episode_lengths
 from torchrl_cebp.replay.her import HindsightRelabel
-from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage
+from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage, episode_rows
 from torchrl_cebp.replay.transforms import replay_cat_tensors
 from torchrl_cebp.replay.writer import EpisodeWriter
 
@@ -12,6 +12,7 @@ __all__ = [
     "EpisodeWriter",
     "HindsightRelabel",
     "episode_lengths",
+    "episode_rows",
     "episode_storage",
     "make_replay_buffer",
     "replay_cat_tensors",

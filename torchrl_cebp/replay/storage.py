@@ -19,6 +19,19 @@ ASSEMBLE_FRAMES = (
 )
 
 
+def episode_rows(capacity: int, episode_steps: int) -> int:
+    """Rows an episode storage of ``capacity`` transitions holds for ``episode_steps``-step episodes.
+
+    TorchRL rounds up (a ``LazyTensorStorage`` with ``ndim=2`` allocates ``ceil(capacity / T)`` rows and
+    raises its ``max_size`` to match), so 1e6 transitions of 70-step episodes are 14,286 rows.
+
+    Example:
+        >>> episode_rows(1_000_000, 50), episode_rows(1_000_000, 70)
+        (20000, 14286)
+    """
+    return -(capacity // -episode_steps)
+
+
 class RowWrites:
     """How many times each row of an episode storage was written, in memory every process holding the storage shares.
 
@@ -175,6 +188,7 @@ class _EpisodeRows:
             saved = TensorDict().load_state_dict(state_dict[_upstream.STORAGE_STATE_KEY], strict=False)
             # Our states keep the filled rows and the row count; TorchRL's (and older ones) every row.
             rows = state_dict.get("rows", saved.shape[0])
+            row_length = saved.shape[1]
             self._check_saved_rows(rows, saved.shape[1])
             if "rows" in state_dict:  # the filled rows, back into a storage of the full capacity
                 full = saved.apply(lambda t: torch.zeros((rows, *t.shape[1:]), dtype=t.dtype),
@@ -182,6 +196,9 @@ class _EpisodeRows:
                 full[: saved.shape[0]] = saved
                 state_dict = {**state_dict, _upstream.STORAGE_STATE_KEY: full.state_dict()}
         super().load_state_dict(state_dict)
+        if state_dict.get("initialized"):
+            # TorchRL's load keeps the unrounded max_size its own first write would have raised to whole rows.
+            self.max_size = rows * row_length
         self._lengths = None
 
     def loads(self, path: Any) -> None:
@@ -189,11 +206,13 @@ class _EpisodeRows:
         if len(saved_shape) >= 2:
             self._check_saved_rows(saved_shape[0], saved_shape[1])
         super().loads(path)
+        if len(saved_shape) >= 2:
+            self.max_size = saved_shape[0] * saved_shape[1]
         self._lengths = None
 
     def _check_saved_rows(self, rows: int, row_length: int) -> None:
         """Refuses a saved storage of another number of rows: TorchRL would fail on the copy, or adopt its size."""
-        own_rows = self.max_size // row_length
+        own_rows = episode_rows(self.max_size, row_length)
         if rows != own_rows:
             raise ValueError(
                 f"the saved buffer holds {rows} episodes of {row_length} steps (capacity {rows * row_length} "

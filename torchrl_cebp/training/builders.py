@@ -23,7 +23,7 @@ from torchrl_cebp.agents import HERDDPGLoss, ObsGoalNormalizer, make_critic
 from torchrl_cebp.envs import FRANKA_TASK, make_env_from_config
 from torchrl_cebp.envs.franka import FrankaLayout
 from torchrl_cebp.envs.goal_spaces import get_goal_space
-from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+from torchrl_cebp.replay import HindsightRelabel, episode_rows, make_replay_buffer
 from torchrl_cebp.replay.samplers.per_worker import rows_of_worker
 from torchrl_cebp.samplers import PerWorkerSampler
 from torchrl_cebp.training.collection import EpisodeBatches, make_collector, make_policy
@@ -131,7 +131,7 @@ def worker_share(capacity: int, episode_steps: int, workers: int, episodes_per_w
         >>> worker_share(1_000_000, 50, 8, 2), worker_share(1_000_000, 70, 8, 2)
         (125000, 125020)
     """
-    return rows_of_worker(capacity // episode_steps, 0, workers, episodes_per_worker) * episode_steps
+    return rows_of_worker(episode_rows(capacity, episode_steps), 0, workers, episodes_per_worker) * episode_steps
 
 
 def make_sampler(cfg: DictConfig) -> Sampler:
