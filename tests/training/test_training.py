@@ -494,3 +494,14 @@ def test_episode_steps_give_slide_and_the_franka_their_own_length_and_folder():
     validate_config(franka)
     assert episode_steps(franka) == 50 and env_label(franka.env) == "franka_pick_place-standard-T50"
     assert episode_steps(config("env=franka_pick_place")) == 100
+
+
+@pytest.mark.parametrize(("workers", "per_worker", "capacities"), [
+    (1, "true", [1_000_020]), (2, "false", [1_000_020]), (8, "true", [125_020] * 8)])
+def test_a_per_holds_priorities_for_every_transition_of_70_step_episodes(workers, per_worker, capacities):
+    # 1e6 transitions of 70-step Slide episodes are 14,286 rows (TorchRL rounds up): 1,000,020 transitions.
+    cfg = config("sampler=per", "env=slide", "env.episode_steps=70", f"workers={workers}",
+                 f"replay.per_worker={per_worker}", "replay.capacity=1000000")
+    sampler = make_sampler(cfg)
+    shards = sampler.samplers if isinstance(sampler, PerWorkerSampler) else [sampler]
+    assert [shard.max_size for shard in shards] == capacities

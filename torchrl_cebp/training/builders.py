@@ -137,8 +137,10 @@ def worker_share(capacity: int, episode_steps: int, workers: int, episodes_per_w
 def make_sampler(cfg: DictConfig) -> Sampler:
     """The replay sampler of ``cfg.sampler``; with per-worker replay, one per worker inside a :class:`PerWorkerSampler`.
 
-    Worker ``w`` gets the episodes of its ``rollouts_per_cycle`` envs. A PER shard holds its worker's rows of
-    ``replay.capacity``; a shard with a ``seed`` (MEP's density model) gets one of its own.
+    Worker ``w`` gets the episodes of its ``rollouts_per_cycle`` envs. A PER (one, or a worker's shard) holds
+    priorities for every transition its rows of the storage hold: ``replay.capacity`` rounded up to whole episodes,
+    as TorchRL's storage rounds it (:func:`~torchrl_cebp.replay.episode_rows`). A shard with a ``seed`` (MEP's
+    density model) gets one of its own.
 
     Example:
         >>> from omegaconf import OmegaConf
@@ -147,17 +149,17 @@ def make_sampler(cfg: DictConfig) -> Sampler:
         >>> make_sampler(cfg)
         PerWorkerSampler(workers=4, episodes_per_worker=2, sampler=UniformEpisodeSampler(n_episodes=0))
     """
-    if replay_layout(cfg) != "per_worker":
-        return instantiate(cfg.sampler)
+    per_worker = replay_layout(cfg) == "per_worker"
+    workers = cfg.workers if per_worker else 1
     shards = []
-    for worker in range(cfg.workers):
+    for worker in range(workers):
         own = {}
         if "capacity" in cfg.sampler:
-            own["capacity"] = worker_share(cfg.sampler.capacity, episode_steps(cfg), cfg.workers, cfg.rollouts_per_cycle)
-        if "seed" in cfg.sampler:
+            own["capacity"] = worker_share(cfg.sampler.capacity, episode_steps(cfg), workers, cfg.rollouts_per_cycle)
+        if "seed" in cfg.sampler and per_worker:
             own["seed"] = derive_seed(cfg.sampler.seed, worker)
         shards.append(instantiate(cfg.sampler, **own))
-    return PerWorkerSampler(*shards, episodes_per_worker=cfg.rollouts_per_cycle)
+    return PerWorkerSampler(*shards, episodes_per_worker=cfg.rollouts_per_cycle) if per_worker else shards[0]
 
 
 def make_replay(cfg: DictConfig, sampler: Sampler, env: EnvBase) -> tuple[TensorDictReplayBuffer, HindsightRelabel]:
