@@ -505,3 +505,5 @@ def test_a_per_holds_priorities_for_every_transition_of_70_step_episodes(workers
     sampler = make_sampler(cfg)
     shards = sampler.samplers if isinstance(sampler, PerWorkerSampler) else [sampler]
     assert [shard.max_size for shard in shards] == capacities
+    replay, _ = make_replay(cfg, sampler, make_env(cfg))  # the buffer accepts them: its storage rounds alike
+    assert replay.storage.max_size == 1_000_020

@@ -124,6 +124,13 @@ def replay_layout(cfg: DictConfig) -> str:
     return "per_worker" if cfg.replay.per_worker else "merged"
 
 
+def replay_capacity(cfg: DictConfig) -> int:
+    """The transitions the replay's storage holds: ``replay.capacity`` rounded up to whole episodes of the task, as
+    TorchRL's episode storage rounds it (:func:`~torchrl_cebp.replay.episode_rows`; 70-step Slide: 1,000,020)."""
+    steps = episode_steps(cfg)
+    return episode_rows(cfg.replay.capacity, steps) * steps
+
+
 def worker_share(capacity: int, episode_steps: int, workers: int, episodes_per_worker: int) -> int:
     """The most transitions one worker's rows hold of a storage of ``capacity`` (see :class:`~torchrl_cebp.samplers.WorkerRows`).
 
@@ -169,7 +176,7 @@ def make_replay(cfg: DictConfig, sampler: Sampler, env: EnvBase) -> tuple[Tensor
     otherwise draw from numpy's unseeded global RNG.
     """
     her = HindsightRelabel(env.compute_reward, future_p=cfg.replay.future_p, strategy=cfg.replay.strategy)
-    replay = make_replay_buffer(sampler, her, capacity=cfg.replay.capacity, batch_size=cfg.batch_size * cfg.workers,
+    replay = make_replay_buffer(sampler, her, capacity=replay_capacity(cfg), batch_size=cfg.batch_size * cfg.workers,
                                 generator=torch.Generator().manual_seed(derive_seed(cfg.seed, 3)))
     return replay, her
 

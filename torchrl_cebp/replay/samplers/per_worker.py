@@ -47,7 +47,7 @@ class WorkerRows:
     ``w`` the episodes of its envs ``w e .. w e + e - 1``. With a row count that is not a multiple of
     ``e x W`` the workers' shares differ by up to ``e`` rows, and once the writer wraps around the
     storage a cycle's envs reach the workers shifted; the default capacities (1e6 transitions of 50-
-    or 100-step episodes, 16 envs) are multiples. It answers what a sampler asks of an episode storage (``ndim``, ``shape`` and
+    or 100-step episodes, 16 envs) are multiples, 70-step Slide's 14,286 rows are not. It answers what a sampler asks of an episode storage (``ndim``, ``shape`` and
     ``max_size`` of the filled and the whole local rows, ``len``, ``get``) in local rows.
 
     Examples:
@@ -112,7 +112,7 @@ def rows_of_worker(rows: int, worker: int, workers: int, episodes_per_worker: in
     """How many of a storage's first ``rows`` rows are ``worker``'s (see :class:`WorkerRows`); worker 0 has the most.
 
     Example:
-        >>> rows_of_worker(14285, 0, 8, 2), rows_of_worker(14285, 7, 8, 2)
+        >>> rows_of_worker(14286, 0, 8, 2), rows_of_worker(14286, 7, 8, 2)
         (1786, 1784)
     """
     full, rest = divmod(rows, workers * episodes_per_worker)
