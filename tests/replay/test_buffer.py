@@ -207,3 +207,10 @@ def test_a_capacity_that_is_not_whole_episodes_resumes_and_wraps_as_before(how, 
         rb.extend(labelled_episodes(3, first_id=4))  # rows 4, 0, 1: the restored buffer wraps where the saved one does
         stored_ids = rb.storage[torch.arange(5)]["achieved_goal"][..., 0]
         assert torch.equal(stored_ids, torch.tensor([5.0, 6, 2, 3, 4])[:, None].expand(5, T))
+
+
+def test_a_per_smaller_than_its_storage_rounded_to_whole_episodes_is_refused_at_the_first_write():
+    capacity = 4 * T + T // 2  # the storage rounds it up to 5 rows on the first write; the sum tree cannot grow
+    rb = make_replay_buffer(PERSampler(capacity), HindsightRelabel(sparse_reward), capacity=capacity)
+    with pytest.raises(ValueError, match=rf"holds {capacity} transitions, but its storage holds {5 * T} .*capacity={5 * T}"):
+        rb.extend(make_episodes(2))

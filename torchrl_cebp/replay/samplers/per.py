@@ -97,8 +97,14 @@ class PERSampler(PrioritizedSampler):
         super().mark_update(index, storage=storage)
         if storage is None or getattr(storage, "ndim", 1) != 2:
             return
-        rows = stored_rows(index)
         row_length = storage.shape[1]
+        if storage.max_size > self.max_size:  # TorchRL rounds a 2-D storage up to whole rows on its first write
+            raise ValueError(
+                f"the PERSampler holds {self.max_size} transitions, but its storage holds {storage.max_size} "
+                f"({storage.max_size // row_length} episodes of {row_length} steps, the capacity rounded up to whole "
+                f"episodes): build it with capacity={storage.max_size}"
+            )
+        rows = stored_rows(index)
         padding = ~valid_steps(episode_lengths(storage.get(rows), self.end_key), row_length)
         if padding.any():
             rows_of, steps_of = padding.nonzero(as_tuple=True)
