@@ -14,6 +14,15 @@ def sparse_reward(achieved_goal: torch.Tensor, desired_goal: torch.Tensor) -> to
     return -(torch.linalg.vector_norm(achieved_goal - desired_goal, dim=-1, keepdim=True) > 0.05).float()
 
 
+def restore(saved, restored, how: str, tmp_path: Path) -> None:
+    """Restores buffer (or sampler) ``saved`` into ``restored``: through files (``how="dumps"``) or a state dict."""
+    if how == "dumps":
+        saved.dumps(tmp_path)
+        restored.loads(tmp_path)
+    else:
+        restored.load_state_dict(saved.state_dict())
+
+
 def make_episodes(
     n: int,
     length: int = T,

@@ -4,7 +4,7 @@ import pytest
 import torch
 from torchrl.data import RoundRobinWriter
 
-from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
+from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, restore, sparse_reward
 from tests.replay.test_her import decode, labelled_episodes
 from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
 from torchrl_cebp.samplers import CEBPSampler, InitialCEBPSampler, ReleasedCEBPSampler, CPERSampler, EBPSampler, MEPSampler, PERSampler, UniformEpisodeSampler
@@ -172,21 +172,17 @@ def test_pin_memory_pins_the_batches():
 
 @pytest.mark.parametrize("name", ["cebp", "per"])
 @pytest.mark.parametrize("saved_rows, rows", [(20, 10), (10, 20)])
-@pytest.mark.parametrize("how", ["load_state_dict", "loads"])
+@pytest.mark.parametrize("how", ["state_dict", "dumps"])
 def test_a_state_of_another_capacity_is_refused_with_the_capacity_it_needs(name, saved_rows, rows, how, tmp_path):
     saved = make_replay_buffer(SAMPLERS[name](saved_rows * T), HindsightRelabel(sparse_reward), capacity=saved_rows * T)
     saved.extend(make_episodes(5))
     other = make_replay_buffer(SAMPLERS[name](rows * T), HindsightRelabel(sparse_reward), capacity=rows * T)
     expected = rf"holds {saved_rows} episodes of {T} steps.*this one {rows}.*capacity={saved_rows * T}"
     with pytest.raises(ValueError, match=expected):
-        if how == "loads":
-            saved.dumps(tmp_path)
-            other.loads(tmp_path)
-        else:
-            other.load_state_dict(saved.state_dict())
+        restore(saved, other, how, tmp_path)
 
 
-@pytest.mark.parametrize("how", ["load_state_dict", "loads"])
+@pytest.mark.parametrize("how", ["state_dict", "dumps"])
 def test_a_capacity_that_is_not_whole_episodes_resumes_and_wraps_as_before(how, tmp_path):
     # 70-step Slide in 1e6 transitions: TorchRL rounds the rows up (here 4.5 rows of T give 5) on the first write.
     capacity = 4 * T + T // 2
@@ -197,11 +193,7 @@ def test_a_capacity_that_is_not_whole_episodes_resumes_and_wraps_as_before(how, 
     saved = buffer()
     saved.extend(labelled_episodes(4))
     restored = buffer()
-    if how == "loads":
-        saved.dumps(tmp_path)
-        restored.loads(tmp_path)
-    else:
-        restored.load_state_dict(saved.state_dict())
+    restore(saved, restored, how, tmp_path)
     assert restored.storage.max_size == saved.storage.max_size == 5 * T
     for rb in (saved, restored):
         rb.extend(labelled_episodes(3, first_id=4))  # rows 4, 0, 1: the restored buffer wraps where the saved one does

@@ -12,7 +12,7 @@ from tensordict import TensorDict
 from torchrl.collectors import MultiAsyncCollector, MultiSyncCollector
 from torchrl.data import LazyTensorStorage, PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 
-from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
+from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, restore, sparse_reward
 from tests.replay.test_buffer import SAMPLERS
 from torchrl_cebp.envs import make_env
 from torchrl_cebp.replay import EpisodeStorage, EpisodeWriter, HindsightRelabel, episode_lengths, make_replay_buffer
@@ -315,11 +315,7 @@ def test_a_resumed_per_beta_anneal_goes_on_where_it_stopped(how, tmp_path):
     for _ in range(4):
         scheduler.step()
     restored = buffer()
-    if how == "dumps":
-        original.dumps(tmp_path)
-        restored.loads(tmp_path)
-    else:
-        restored.load_state_dict(original.state_dict())
+    restore(original, restored, how, tmp_path)
     resumed = restored.sampler.beta_scheduler()
     for _ in range(3):
         scheduler.step()

@@ -8,7 +8,7 @@ from torchrl.collectors import Collector, MultiAsyncCollector, MultiSyncCollecto
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs import TransformedEnv
 
-from tests.replay.conftest import T, make_episodes, sparse_reward
+from tests.replay.conftest import T, make_episodes, restore, sparse_reward
 from tests.replay.test_episodes import EndAboveHeight
 from torchrl_cebp.envs import make_env
 from torchrl_cebp.replay import EpisodeStorage, EpisodeWriter, HindsightRelabel, episode_lengths, make_replay_buffer
@@ -143,11 +143,7 @@ def test_waiting_frames_survive_a_save_and_load(how, tmp_path):
         straight.extend(batch.clone())
     for batch in batches[:2]:
         saved.extend(batch.clone())
-    if how == "dumps":
-        saved.dumps(tmp_path)
-        restored.loads(tmp_path)
-    else:
-        restored.load_state_dict(saved.state_dict())
+    restore(saved, restored, how, tmp_path)
     for batch in batches[2:]:
         restored.extend(batch.clone())
     assert (restored.storage.get(slice(None)) == straight.storage.get(slice(None))).all()

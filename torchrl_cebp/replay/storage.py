@@ -188,30 +188,25 @@ class _EpisodeRows:
             saved = TensorDict().load_state_dict(state_dict[_upstream.STORAGE_STATE_KEY], strict=False)
             # Our states keep the filled rows and the row count; TorchRL's (and older ones) every row.
             rows = state_dict.get("rows", saved.shape[0])
-            row_length = saved.shape[1]
-            self._check_saved_rows(rows, saved.shape[1])
+            self._adopt_saved_rows(rows, saved.shape[1])
             if "rows" in state_dict:  # the filled rows, back into a storage of the full capacity
                 full = saved.apply(lambda t: torch.zeros((rows, *t.shape[1:]), dtype=t.dtype),
                                    batch_size=[rows, *saved.shape[1:]])
                 full[: saved.shape[0]] = saved
                 state_dict = {**state_dict, _upstream.STORAGE_STATE_KEY: full.state_dict()}
         super().load_state_dict(state_dict)
-        if state_dict.get("initialized"):
-            # TorchRL's load keeps the unrounded max_size its own first write would have raised to whole rows.
-            self.max_size = rows * row_length
         self._lengths = None
 
     def loads(self, path: Any) -> None:
         saved_shape = TensorDict.load_memmap(path).shape  # memory-mapped: reading the shape loads no data
         if len(saved_shape) >= 2:
-            self._check_saved_rows(saved_shape[0], saved_shape[1])
+            self._adopt_saved_rows(saved_shape[0], saved_shape[1])
         super().loads(path)
-        if len(saved_shape) >= 2:
-            self.max_size = saved_shape[0] * saved_shape[1]
         self._lengths = None
 
-    def _check_saved_rows(self, rows: int, row_length: int) -> None:
-        """Refuses a saved storage of another number of rows: TorchRL would fail on the copy, or adopt its size."""
+    def _adopt_saved_rows(self, rows: int, row_length: int) -> None:
+        """Takes the saved storage's whole-row size, as its first write did (TorchRL's loads keep the unrounded
+        ``max_size``); refuses one of another number of rows: TorchRL would fail on the copy, or adopt its size."""
         own_rows = episode_rows(self.max_size, row_length)
         if rows != own_rows:
             raise ValueError(
@@ -219,6 +214,7 @@ class _EpisodeRows:
                 f"transitions), this one {own_rows} (capacity {self.max_size}): build the buffer with "
                 f"capacity={rows * row_length} to load it"
             )
+        self.max_size = rows * row_length
 
 
 @dataclass(frozen=True)
