@@ -442,7 +442,7 @@ def test_a_checkpoint_from_before_per_worker_replay_resumes_only_as_merged():
     saved = {key: value for key, value in OmegaConf.to_container(config("workers=2"), resolve=True).items()}
     del saved["replay"]["per_worker"]
     check_same_run(saved, config("workers=2", "replay.per_worker=false"))
-    with pytest.raises(ConfigError, match="per_worker': False.*per_worker': True"):
+    with pytest.raises(ConfigError, match="made with replay.per_worker=False, this config has replay.per_worker=True"):
         check_same_run(saved, config("workers=2"))
 
 
@@ -454,8 +454,23 @@ def test_a_checkpoint_from_before_an_env_option_resumes_as_that_run_did(key, leg
     saved = OmegaConf.to_container(config("env=franka_pick_place"), resolve=True)
     del saved["env"][key]
     check_same_run(saved, config("env=franka_pick_place"))
-    with pytest.raises(ConfigError, match=f"{key}': {legacy}.*{key}': {override}"):
+    with pytest.raises(ConfigError, match=f"made with env.{key}={legacy}, this config has env.{key}={override}"):
         check_same_run(saved, config("env=franka_pick_place", f"env.{key}={override}"))
+
+
+def test_a_refused_resume_names_each_differing_setting_and_how_to_extend_a_per_run(tmp_path):
+    train(config("sampler=per", "env=push", "epochs=1"), tmp_path)
+    extended = ["sampler=per", "env=push", "epochs=2", "resume=true"]
+    with pytest.raises(ConfigError) as err:
+        train(config(*extended, "agent.hidden=[32,16]"), tmp_path)
+    assert str(err.value).startswith(
+        "cannot resume: the checkpoint was made with sampler.beta_anneal_draws=6, this config has "
+        "sampler.beta_anneal_draws=12 (PER anneals beta")
+    assert "add the override sampler.beta_anneal_draws=6)" in str(err.value)
+    assert str(err.value).endswith("the checkpoint was made with agent.hidden=[32, 32], this config has "
+                                   "agent.hidden=[32, 16]")
+    train(config(*extended, "sampler.beta_anneal_draws=6"), tmp_path)  # the hint's override resumes the run
+    assert [row["epoch"] for row in rows(tmp_path / "progress.csv")] == ["0", "1"]
 
 
 def test_grasped_start_is_checked_and_names_the_run_folder():

@@ -235,21 +235,42 @@ def with_legacy_defaults(saved: dict) -> dict:
 def check_same_run(saved: dict, cfg: DictConfig) -> None:
     """Raises :class:`ConfigError` when ``cfg`` differs from a checkpoint's config in a run-defining key.
 
+    The error names each differing setting by its dotted path, as a Hydra override would.
+
     Examples:
         >>> from omegaconf import OmegaConf
         >>> check_same_run({"seed": 0, "epochs": 5}, OmegaConf.create({"seed": 0, "epochs": 9}))
         >>> try:
-        ...     check_same_run({"seed": 0}, OmegaConf.create({"seed": 1}))
+        ...     check_same_run({"seed": 0, "agent": {"hidden": [64], "lr": 0.001}},
+        ...                    OmegaConf.create({"seed": 1, "agent": {"hidden": [64], "lr": 0.01}}))
         ... except ConfigError as err:
         ...     print(err)
-        cannot resume: the checkpoint was made with seed=0, this config has seed=1
+        cannot resume: the checkpoint was made with seed=0, this config has seed=1; the checkpoint was made with agent.lr=0.001, this config has agent.lr=0.01
     """
     current = OmegaConf.to_container(cfg, resolve=True)
     saved = with_legacy_defaults(saved)
     differences = [
-        f"{key}={saved.get(key)!r}, this config has {key}={current.get(key)!r}"
+        f"the checkpoint was made with {path}={was!r}, this config has {path}={now!r}"
+        + RESUME_HINTS.get(path, "").format(was=was)
         for key in RUN_DEFINING_KEYS
-        if saved.get(key) != current.get(key)
+        for path, was, now in _differing_settings(key, saved.get(key), current.get(key))
     ]
     if differences:
-        raise ConfigError("cannot resume: the checkpoint was made with " + "; ".join(differences))
+        raise ConfigError("cannot resume: " + "; ".join(differences))
+
+
+# Why a setting that follows epochs changes when a run is extended, and how to keep the checkpoint's value.
+RESUME_HINTS = {
+    "sampler.beta_anneal_draws": (
+        " (PER anneals beta over the whole run's updates, so more epochs change its schedule; to extend the run "
+        "on the checkpoint's schedule, add the override sampler.beta_anneal_draws={was})"
+    ),
+}
+
+
+def _differing_settings(path: str, was: object, now: object) -> list[tuple[str, object, object]]:
+    """The leaves, by dotted path, where two config values differ (a leaf absent on one side is None there)."""
+    if isinstance(was, dict) and isinstance(now, dict):
+        return [difference for key in {**was, **now}
+                for difference in _differing_settings(f"{path}.{key}", was.get(key), now.get(key))]
+    return [] if was == now else [(path, was, now)]
