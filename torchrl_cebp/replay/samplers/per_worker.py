@@ -47,8 +47,9 @@ class WorkerRows:
     ``w`` the episodes of its envs ``w e .. w e + e - 1``. With a row count that is not a multiple of
     ``e x W`` the workers' shares differ by up to ``e`` rows, and once the writer wraps around the
     storage a cycle's envs reach the workers shifted; the default capacities (1e6 transitions of 50-
-    or 100-step episodes, 16 envs) are multiples, 70-step Slide's 14,286 rows are not. It answers what a sampler asks of an episode storage (``ndim``, ``shape`` and
-    ``max_size`` of the filled and the whole local rows, ``len``, ``get``) in local rows.
+    or 100-step episodes, 16 envs) are multiples, 70-step Slide's 14,286 rows are not. It answers
+    what a sampler asks of an episode storage (``ndim``, ``shape`` and ``max_size`` of the filled and
+    the whole local rows, ``len``, ``get``) in local rows.
 
     Examples:
         >>> import torch
