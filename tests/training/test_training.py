@@ -520,5 +520,7 @@ def test_a_per_holds_priorities_for_every_transition_of_70_step_episodes(workers
     sampler = make_sampler(cfg)
     shards = sampler.samplers if isinstance(sampler, PerWorkerSampler) else [sampler]
     assert [shard.max_size for shard in shards] == capacities
-    replay, _ = make_replay(cfg, sampler, make_env(cfg))  # the buffer accepts them: its storage rounds alike
+    env = make_env(cfg)
+    replay, _ = make_replay(cfg, sampler, env)  # the buffer accepts them: its storage rounds alike
+    env.close()
     assert replay.storage.max_size == 1_000_020
