@@ -1,10 +1,11 @@
 """The cost of per-worker replay in one draw: 8 workers' draws of 256 against one merged draw of 2048.
 
 The paper-scale draw (``workers=8``, ``batch_size=256``) with HER relabelling, over a buffer of FetchPush-shaped
-episodes written 16 at a time as the trainer writes them, for uniform HER and the Initial commit's CEBP. The two
+episodes written 16 at a time as the trainer writes them, for uniform HER, the Initial commit's CEBP and PER (whose
+draw includes feeding the batch's TD errors back, ``update_td_priorities``, as the trainer does). The two
 layouts are timed in alternation, ``--rounds`` times ``--draws`` draws each, and the median of each is printed with
-their ratio. A draw is the only part of a training epoch whose code differs between the layouts (2,000 of them per
-epoch): ``benchmarks/training.py --methods ours_merged:1 ours:1`` times the whole epoch.
+their ratio. A draw (with PER's priority update) is the only part of a training epoch whose code differs between the
+layouts (2,000 of them per epoch): ``benchmarks/training.py --methods ours_merged:1 ours:1`` times the whole epoch.
 
     .venv/bin/python benchmarks/per_worker_draw.py --episodes 8000
 """
@@ -31,8 +32,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
 
-    from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
-    from torchrl_cebp.samplers import InitialCEBPSampler, PerWorkerSampler, UniformEpisodeSampler
+    from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer, update_td_priorities
+    from torchrl_cebp.samplers import InitialCEBPSampler, PERSampler, PerWorkerSampler, UniformEpisodeSampler
 
     push = OmegaConf.load(Path(__file__).parents[1] / "conf" / "env" / "push.yaml")
     workspace = tuple(map(tuple, push.gripper_workspace))
@@ -41,15 +42,19 @@ def main() -> None:
         return -(torch.linalg.vector_norm(ag - g, dim=-1, keepdim=True) > 0.05).float()
 
     stored = episodes_to_tensordict(make_episodes(args.episodes, seed=0))
-    samplers = {"her": UniformEpisodeSampler, "cebp_initial": lambda: InitialCEBPSampler(workspace=workspace)}
+    capacity = 1_000_000
+    samplers = {"her": lambda workers: UniformEpisodeSampler(),
+                "cebp_initial": lambda workers: InitialCEBPSampler(workspace=workspace),
+                "per": lambda workers: PERSampler(capacity // workers)}
+    td_errors = torch.rand(WORKERS * BATCH_PER_WORKER, generator=torch.Generator().manual_seed(0))
     print(f"{args.episodes} episodes, a draw of {WORKERS} x {BATCH_PER_WORKER}; median ms per draw over "
           f"{args.rounds} rounds of {args.draws}")
     for name, make in samplers.items():
         buffers = {}
         for layout in ("merged", "per_worker"):
-            sampler = make() if layout == "merged" else PerWorkerSampler(
-                *[make() for _ in range(WORKERS)], episodes_per_worker=EPISODES_PER_WORKER)
-            rb = make_replay_buffer(sampler, HindsightRelabel(reward_fn, future_p=FUTURE_P), capacity=1_000_000,
+            sampler = make(1) if layout == "merged" else PerWorkerSampler(
+                *[make(WORKERS) for _ in range(WORKERS)], episodes_per_worker=EPISODES_PER_WORKER)
+            rb = make_replay_buffer(sampler, HindsightRelabel(reward_fn, future_p=FUTURE_P), capacity=capacity,
                                     batch_size=WORKERS * BATCH_PER_WORKER)
             for cycle in stored.split(WORKERS * EPISODES_PER_WORKER):
                 rb.extend(cycle)
@@ -59,7 +64,9 @@ def main() -> None:
             for layout, rb in buffers.items():
                 tick = time.perf_counter()
                 for _ in range(args.draws):
-                    rb.sample()
+                    batch = rb.sample()
+                    batch["td_error"] = td_errors  # fed back to PER only
+                    update_td_priorities(rb, batch)
                 times[layout].append((time.perf_counter() - tick) / args.draws * 1e3)
         merged, per_worker = (statistics.median(times[layout]) for layout in ("merged", "per_worker"))
         print(f"{name:13s} merged {merged:7.2f} ms   per-worker {per_worker:7.2f} ms   ratio {per_worker / merged:.2f}x   "

@@ -31,8 +31,10 @@ seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${
   # 28.3 A Slide, 70-step episodes. Runs with committed epochs go last: a new machine repeats those before a new one.
   SEED_ORDER="1 2 0" seeds +comparison=slide_standard sampler=cebp_initial
   SEED_ORDER="2 0 1" seeds +comparison=slide_standard sampler=her
-  seeds +comparison=push_standard sampler=per                                # 28.4 A Push: the other baselines
+  # 28.4 A Push: the other baselines. PER last: its first runs, of 2026-12-06, fed no TD errors back to the
+  # per-worker shards (update_td_priorities now does), so drew uniformly; they were discarded.
   seeds +comparison=push_standard sampler=ebp
   seeds +comparison=push_standard sampler=mep
+  seeds +comparison=push_standard sampler=per
 } | if [ "${SKIP_COMMITTED:-1}" = 1 ]; then "${FILTER_PYTHON:-.venv/bin/python}" scripts/pending_runs.py; else cat; fi \
   | xargs -r -P "${JOBS:-1}" -L 1 bash -c 'run "$@"' run   # -r: an empty queue runs nothing, not a default train.py

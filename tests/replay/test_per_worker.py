@@ -8,7 +8,7 @@ from torchrl.data.replay_buffers.scheduler import LinearScheduler
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
 from tests.replay.test_samplers import hand_made, np_initial_cebp
-from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, make_replay_buffer
+from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, make_replay_buffer, update_td_priorities
 from torchrl_cebp.samplers import (
     InitialCEBPSampler,
     MEPSampler,
@@ -97,23 +97,45 @@ def test_uniform_her_draws_the_merged_buffers_distribution():
         assert chi2_contingency(table).pvalue > 1e-3, table
 
 
+def per_workers(capacity):
+    return PerWorkerSampler(*[PERSampler(capacity // WORKERS, beta_anneal_draws=10) for _ in range(WORKERS)],
+                            episodes_per_worker=PER_WORKER)
+
+
 def test_per_shards_route_td_errors_and_anneal_together():
-    capacity = 4 * CYCLE * T
-    sampler = PerWorkerSampler(*[PERSampler(capacity // WORKERS, beta_anneal_draws=10) for _ in range(WORKERS)],
-                               episodes_per_worker=PER_WORKER)
+    capacity = 8 * CYCLE * T
+    sampler = per_workers(capacity)
     rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward), capacity=capacity, batch_size=32)
-    rb.extend(make_episodes(CYCLE))
+    for _ in range(4):
+        rb.extend(make_episodes(CYCLE))  # 400 transitions per worker
     batch = rb.sample()
     batch["td_error"] = torch.zeros(32)
-    batch["td_error"][:8] = 100.0  # worker 0's part
-    rb.update_tensordict_priority(batch)
-    rows = torch.cat([rb.sample()["index"][:8, 0] for _ in range(20)])
-    hot = batch["index"][:8, 0].unique()
-    assert torch.isin(rows, hot).float().mean() > 0.9  # worker 0 now draws its high-error transitions
+    batch["td_error"][:8] = 1e6  # 8 of worker 0's transitions
+    update_td_priorities(rb, batch)
+    hot = {tuple(pair) for pair in batch["index"][:8].tolist()}
+    drawn = torch.cat([rb.sample()["index"][:8] for _ in range(20)]).tolist()
+    # uniform draws would hit these 8 of worker 0's 400 transitions 2% of the time
+    assert sum(tuple(pair) in hot for pair in drawn) / len(drawn) > 0.9
+    # and the other workers, all of whose drawn errors were 0, now avoid their drawn transitions
+    cold = {tuple(pair) for pair in batch["index"][8:].tolist()}
+    drawn_elsewhere = torch.cat([rb.sample()["index"][8:] for _ in range(20)]).tolist()
+    assert not any(tuple(pair) in cold for pair in drawn_elsewhere)
     scheduler = LinearScheduler(sampler, "beta", final_value=1.0, num_steps=10)
     for _ in range(10):
         scheduler.step()
     assert [shard.beta for shard in sampler.samplers] == pytest.approx([1.0] * WORKERS)
+
+
+def test_torchrls_tensordict_priority_update_skips_per_worker_shards():
+    # Pins why update_td_priorities exists: TorchRL 0.14.1's update_tensordict_priority returns unless the
+    # buffer's sampler is a PrioritizedSampler. If this fails, TorchRL routes it now; the helper still works.
+    sampler = per_workers(4 * CYCLE * T)
+    rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward), capacity=4 * CYCLE * T, batch_size=32)
+    rb.extend(make_episodes(CYCLE))
+    batch = rb.sample()
+    batch["td_error"] = torch.full((32,), 1e6)
+    rb.update_tensordict_priority(batch)
+    assert [float(shard["max_priority"]) for shard in sampler.state_dict()["shards"]] == [1.0] * WORKERS
 
 
 def test_a_per_shard_smaller_than_its_workers_rows_is_refused():

@@ -63,6 +63,16 @@ def test_tiny_run_writes_csv_and_checkpoint(tmp_path, sampler):
     assert float(log[-1]["test_success"]) == evaluate_success_rate(test_env, load_policy(tmp_path), cfg.test_episodes)
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_per_training_feeds_td_errors_back_on_merged_and_per_worker_replay(tmp_path, workers):
+    # Per-worker PER once drew uniformly for ever: TorchRL's update_tensordict_priority skips a PerWorkerSampler.
+    train(config("sampler=per", "env=push", f"workers={workers}", "epochs=1"), tmp_path)
+    sampler = load_checkpoint(tmp_path)["replay"]["_sampler"]
+    shards = sampler["shards"] if workers > 1 else [sampler]
+    assert all(float(shard["max_priority"]) != 1.0 for shard in shards)  # 1.0: the untouched default
+    assert float(rows(tmp_path / "progress.csv")[0]["is_weight_min"]) < 1.0
+
+
 def test_best_policy_is_the_last_epoch_with_the_highest_success_across_a_resume(tmp_path):
     train(config("sampler=her", "env=push", "epochs=2", "test_episodes=4"), tmp_path)
     train(config("sampler=her", "env=push", "epochs=4", "test_episodes=4", "resume=true"), tmp_path)

@@ -22,8 +22,8 @@ from torchrl.data.replay_buffers.samplers import Sampler
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from tqdm import tqdm
 
-from torchrl_cebp.replay import HindsightRelabel
-from torchrl_cebp.samplers import EpisodePrioritySampler, PERSampler, PerWorkerSampler
+from torchrl_cebp.replay import HindsightRelabel, update_td_priorities
+from torchrl_cebp.samplers import EpisodePrioritySampler, PERSampler, worker_sampler
 from torchrl_cebp.training.builders import (
     Agent,
     TaskDims,
@@ -83,14 +83,9 @@ class RelabelledTransitions:
                           [goal.shape[0]])
 
 
-def _shard(sampler: Sampler) -> Sampler:
-    """The sampler of one worker: the sampler itself unless it is a :class:`PerWorkerSampler`."""
-    return sampler.samplers[0] if isinstance(sampler, PerWorkerSampler) else sampler
-
-
 def sampling_spread(sampler: Sampler) -> dict[str, float]:
     """Effective fraction of stored episodes an episode sampler draws from, ``1 / (N sum p^2)``."""
-    if not isinstance(_shard(sampler), EpisodePrioritySampler) or not sampler.n_episodes:
+    if not isinstance(worker_sampler(sampler), EpisodePrioritySampler) or not sampler.n_episodes:
         return {}
     n = sampler.n_episodes
     p = sampler.probabilities(torch.arange(n))
@@ -101,7 +96,7 @@ def beta_annealing(sampler: Sampler) -> LinearScheduler | None:
     """PER's linear beta schedule over its draws (every worker's at once), or ``None`` for other samplers."""
     if isinstance(sampler, PERSampler):
         return sampler.beta_scheduler()
-    per = _shard(sampler)
+    per = worker_sampler(sampler)
     if not isinstance(per, PERSampler):
         return None
     # One schedule sets every worker's beta (PerWorkerSampler.beta); the checkpoint keeps its step count.
@@ -134,7 +129,7 @@ class Learner:
         self.optimizer.zero_grad()
         (losses["loss_actor"] + losses["loss_value"]).backward()
         self.optimizer.step()
-        self.replay.update_tensordict_priority(batch)  # a no-op unless the sampler is PER
+        update_td_priorities(self.replay, batch)
         for key in ("loss_actor", "loss_value", "action_l2"):
             self.totals[key] += losses[key].detach()
         self.totals["q_mean"] += losses["pred_value"].mean()

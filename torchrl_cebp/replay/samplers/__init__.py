@@ -5,7 +5,7 @@ from torchrl_cebp.replay.samplers.cper import CPERSampler
 from torchrl_cebp.replay.samplers.ebp import EBPSampler
 from torchrl_cebp.replay.samplers.mep import MEPSampler
 from torchrl_cebp.replay.samplers.per import PERSampler
-from torchrl_cebp.replay.samplers.per_worker import PerWorkerSampler, WorkerRows
+from torchrl_cebp.replay.samplers.per_worker import PerWorkerSampler, WorkerRows, worker_sampler
 from torchrl_cebp.replay.samplers.uniform import UniformEpisodeSampler
 
 __all__ = [
@@ -20,4 +20,5 @@ __all__ = [
     "ReleasedCEBPSampler",
     "UniformEpisodeSampler",
     "WorkerRows",
+    "worker_sampler",
 ]

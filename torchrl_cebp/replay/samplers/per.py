@@ -26,7 +26,9 @@ class PERSampler(PrioritizedSampler):
     transitions enter at the highest priority seen, and the padding steps of
     episodes that ended early at probability 0. Feed priorities back after
     each update with ``rb.update_tensordict_priority(batch)`` (the batch holds
-    ``"td_error"`` once a TorchRL loss ran on it) or ``rb.update_priority``.
+    ``"td_error"`` once a TorchRL loss ran on it) or ``rb.update_priority``; inside a
+    :class:`~torchrl_cebp.samplers.PerWorkerSampler`, only the latter reaches it
+    (:func:`~torchrl_cebp.replay.update_td_priorities` does that).
     Beta grows linearly from ``beta`` to ``beta_end`` over ``beta_anneal_draws``
     draws, as in baselines' PER over training, through the TorchRL scheduler
     :meth:`beta_scheduler` returns: step it once per draw.

@@ -152,6 +152,9 @@ class PerWorkerSampler(Sampler):
     priorities, density model (MEP), segment trees (PER), episode count and importance-sampling
     normalisation are its own. A draw of ``batch_size`` concatenates the ``W`` workers' draws of
     ``batch_size // W``, worker 0 first, with ``"priority_weight"`` normalised within each part.
+    Feed TD errors back to PER shards with :func:`~torchrl_cebp.replay.update_td_priorities`
+    (``rb.update_priority``): TorchRL's ``rb.update_tensordict_priority`` skips any sampler that is
+    not a :class:`~torchrl.data.PrioritizedSampler`, this one included.
 
     The loss over such a batch is its plain mean: with equal parts that is the mean of the ``W``
     per-worker means, which baselines' sum of the ``W`` workers' gradients equals up to the factor
@@ -377,3 +380,14 @@ class PerWorkerSampler(Sampler):
     def __repr__(self) -> str:
         return (f"PerWorkerSampler(workers={self.workers}, episodes_per_worker={self.episodes_per_worker}, "
                 f"sampler={self.samplers[0]!r})")
+
+
+def worker_sampler(sampler: Sampler) -> Sampler:
+    """The sampler of one worker: ``sampler`` itself unless it is a :class:`PerWorkerSampler` (then its first worker's).
+
+    Example:
+        >>> from torchrl_cebp.samplers import PERSampler
+        >>> worker_sampler(PerWorkerSampler(PERSampler(100), PERSampler(100)))
+        PERSampler(alpha=0.6, beta=0.400 -> 1.0 over 100000 draws)
+    """
+    return sampler.samplers[0] if isinstance(sampler, PerWorkerSampler) else sampler
