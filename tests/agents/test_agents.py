@@ -116,10 +116,13 @@ class TestHERDDPGLoss:
         torch.testing.assert_close(out["loss_actor"], expected)
         assert out["action_l2"] == pytest.approx(td["action"].square().mean().item())
 
-    def test_writes_td_error_for_prioritised_samplers(self):
+    def test_writes_the_absolute_td_error_for_prioritised_samplers(self):
+        # baselines' PER priority is |TD error| + eps; TorchRL's DDPGLoss writes the square
         batch = _batch(8)
-        _loss()(batch)
+        out = _loss()(batch)
         assert batch["td_error"].shape == (8,)
+        torch.testing.assert_close(batch["td_error"], (out["pred_value"] - out["target_value"]).abs())
+        torch.testing.assert_close(out["td_error"], batch["td_error"])
 
 
 class TestHERExploration:

@@ -46,7 +46,8 @@ class HERDDPGLoss(DDPGLoss):
     - the actor loss is ``-mean Q(s, pi(s)) + action_l2 * mean(pi(s)^2)``, unweighted:
       the prioritised HER implementations (PER, CEBP) apply IS weights to the critic only.
 
-    ``"td_error"`` is written into the input batch for prioritised samplers.
+    ``"td_error"`` is written into the input batch for prioritised samplers as ``|Q - target|``,
+    baselines' PER priority before ``eps`` and ``alpha`` (TorchRL's DDPGLoss writes the square).
 
     Examples:
         >>> from tensordict import TensorDict
@@ -85,6 +86,13 @@ class HERDDPGLoss(DDPGLoss):
             done=self.tensor_keys.done,
             terminated=self.tensor_keys.terminated,
         )
+
+    def loss_value(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict]:
+        loss, metadata = super().loss_value(tensordict)
+        # TorchRL's DDPGLoss writes the squared TD error: as a PER priority that would double alpha.
+        abs_error = (metadata["pred_value"] - metadata["target_value"]).abs().detach()
+        tensordict.set(self.tensor_keys.priority, abs_error, inplace=True)
+        return loss, {**metadata, "td_error": abs_error}
 
     def loss_actor(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict]:
         td = tensordict.select(*self.actor_in_keys, *self.value_exclusive_keys, strict=False).detach()
