@@ -20,21 +20,22 @@ seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${
 #   train.py -m +comparison=push_standard seed=0,1,2 sampler=cebp_initial     (robot A, per worker)
 #   train.py -m +comparison=push_released seed=0,1,2 sampler=cebp_released    (robot B, per worker)
 {
-  seeds +comparison=pick_place_standard sampler=cebp_initial                 # 28.1 A PickAndPlace, per worker
   # 28.1 A PickAndPlace HER on the merged buffer, as robot A's Push HER rows: uniform HER draws the same
   # distribution either way (tests/replay/test_per_worker.py).
   seeds +comparison=pick_place_standard sampler=her replay.per_worker=false
   # CPER with its published draw (HindsightRelabel strategy "past"; docs/results.md); run folders end in -her_past.
-  # Seed 0 last: a new machine would repeat its 17 committed epochs before a new one.
   SEED_ORDER="1 2 0" seeds +comparison=pick_place_standard sampler=cper replay.strategy=past
   seeds +comparison=push_standard sampler=cper replay.strategy=past          # 28.2 A Push: CPER
-  # 28.3 A Slide, 70-step episodes. Runs with committed epochs go last: a new machine repeats those before a new one.
-  SEED_ORDER="1 2 0" seeds +comparison=slide_standard sampler=cebp_initial
-  SEED_ORDER="2 0 1" seeds +comparison=slide_standard sampler=her
-  # 28.4 A Push: the other baselines. PER last: its first runs, of 2026-12-06, fed no TD errors back to the
-  # per-worker shards (update_td_priorities now does), so drew uniformly; they were discarded.
+  SEED_ORDER="2 0 1" seeds +comparison=slide_standard sampler=her            # 28.3 A Slide, 70-step episodes
+  # 28.4 A Push: the other baselines. EBP and MEP take no IS weights, so the loss fix of 2026-12-06 leaves them as
+  # they were; PER's first runs fed no TD errors back to the per-worker shards, and were discarded.
   seeds +comparison=push_standard sampler=ebp
+  # The figure's CEBP again with baselines' weighted critic loss, mean(w * delta^2) (2026-12-06): its runs before
+  # are in -wnorm folders. Push first, the panel where the paper's C-Energy leads HER most.
+  seeds +comparison=push_standard sampler=cebp_initial
   seeds +comparison=push_standard sampler=mep
   seeds +comparison=push_standard sampler=per
+  seeds +comparison=pick_place_standard sampler=cebp_initial
+  seeds +comparison=slide_standard sampler=cebp_initial
 } | if [ "${SKIP_COMMITTED:-1}" = 1 ]; then "${FILTER_PYTHON:-.venv/bin/python}" scripts/pending_runs.py; else cat; fi \
   | xargs -r -P "${JOBS:-1}" -L 1 bash -c 'run "$@"' run   # -r: an empty queue runs nothing, not a default train.py

@@ -95,9 +95,16 @@ class TestHERDDPGLoss:
         perturbed["next", "reward"][0] = 1e3
         for g, h in zip(reference, _critic_grads(loss, perturbed), strict=True):
             torch.testing.assert_close(g, h)
-        # and it is the weighted mean of the other samples
+        # and it is baselines' mean(w * delta^2) over all 8: 7/8 of the other samples' unweighted mean
         for g, h in zip(reference, _critic_grads(loss, batch[1:].exclude("priority_weight")), strict=True):
-            torch.testing.assert_close(g, h)
+            torch.testing.assert_close(g, h * 7 / 8)
+
+    def test_the_weighted_critic_loss_is_baselines_mean_of_weight_times_squared_error(self):
+        batch = _batch(8)
+        batch["priority_weight"] = torch.linspace(0.01, 1.0, 8)
+        out = _loss()(batch)
+        expected = (batch["priority_weight"] * (out["pred_value"] - out["target_value"]).square()).mean()
+        torch.testing.assert_close(out["loss_value"], expected)
 
     def test_is_weights_change_the_critic_loss(self):
         loss = _loss()

@@ -279,6 +279,14 @@ def test_every_sampler_config_instantiates(sampler, env):
     instantiate(config(f"sampler={sampler}", f"env={env}").sampler)
 
 
+def test_per_anneals_over_the_run_or_over_the_papers_50_epochs_in_a_comparison():
+    assert config("sampler=per").sampler.beta_anneal_draws == 2 * 2 * 3  # TINY's epochs x cycles x updates
+    truncated = config("+comparison=push_standard", "sampler=per")  # its runs are the first of the paper's 50 epochs
+    assert (truncated.epochs, truncated.sampler.beta_anneal_draws) == (2, 50 * 2 * 3)
+    with pytest.raises(ConfigError, match="schedule_epochs=0: must be a positive integer"):
+        validate_config(config("schedule_epochs=0"))
+
+
 def test_bad_values_are_listed_with_what_is_allowed():
     with pytest.raises(ConfigError) as err:
         validate_config(config("device=tpu", "epochs=0", "replay.future_p=1.5", "env.goal_space=huge",

@@ -42,7 +42,9 @@ class HERDDPGLoss(DDPGLoss):
     - target actor and critic (update them with ``SoftUpdate(loss, tau=0.05)``);
     - critic target clipped to ``[-1/(1-gamma), 0]`` (:class:`ClippedTD0Estimator`);
     - importance-sampling weights (``"priority_weight"``, when the batch has them) weight
-      the critic's squared TD errors, as in DDPGLoss;
+      the critic's squared TD errors as baselines does, ``mean(w * delta^2)`` (the CEBP
+      Initial commit's and EBP's PER's ``ddpg.py``); DDPGLoss's own weighted mean divides by
+      ``sum(w)`` instead, which puts the critic's gradient back at the unweighted scale;
     - the actor loss is ``-mean Q(s, pi(s)) + action_l2 * mean(pi(s)^2)``, unweighted:
       the prioritised HER implementations (PER, CEBP) apply IS weights to the critic only.
 
@@ -89,6 +91,11 @@ class HERDDPGLoss(DDPGLoss):
 
     def loss_value(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict]:
         loss, metadata = super().loss_value(tensordict)
+        weights = tensordict.get(self.tensor_keys.priority_weight, None)
+        if weights is not None and self.use_prioritized_weights in (True, "auto") and self.reduction == "mean":
+            # DDPGLoss's weighted mean is sum(w l) / sum(w); times mean(w) it is baselines' mean(w l). With CEBP's
+            # max-normalised weights mean(w) falls to ~0.02 once they turn on, and so does the critic's gradient.
+            loss = loss * weights.mean()
         # TorchRL's DDPGLoss writes the squared TD error: as a PER priority that would double alpha.
         abs_error = (metadata["pred_value"] - metadata["target_value"]).abs().detach()
         tensordict.set(self.tensor_keys.priority, abs_error, inplace=True)

@@ -126,7 +126,7 @@ def validate_config(cfg: DictConfig) -> None:
     one_of("replay.strategy", STRATEGIES)
     check("seed", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
     for key in (
-        "workers", "epochs", "cycles_per_epoch", "rollouts_per_cycle", "updates_per_cycle",
+        "workers", "epochs", "schedule_epochs", "cycles_per_epoch", "rollouts_per_cycle", "updates_per_cycle",
         "batch_size", "test_episodes", "threads", "replay.capacity",
     ):
         positive_int(key)
@@ -262,7 +262,8 @@ def check_same_run(saved: dict, cfg: DictConfig) -> None:
 # Why a setting that follows epochs changes when a run is extended, and how to keep the checkpoint's value.
 RESUME_HINTS = {
     "sampler.beta_anneal_draws": (
-        " (PER anneals beta over the whole run's updates, so more epochs change its schedule; to extend the run "
+        " (PER anneals beta over schedule_epochs, which follows epochs unless set, so more epochs change its "
+        "schedule; to extend the run "
         "on the checkpoint's schedule, add the override sampler.beta_anneal_draws={was})"
     ),
 }
