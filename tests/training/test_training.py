@@ -391,10 +391,11 @@ def test_unknown_logger_is_refused_with_the_valid_ones():
 
 
 def test_every_row_names_the_commit_it_ran_on(tmp_path):
-    log = rows(train(config("epochs=1"), tmp_path))
+    # Read before the run: a results sync committing while the run trains moves HEAD, not the run's code.
     commit = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=REPO, capture_output=True, text=True)
     if commit.returncode != 0:
         pytest.skip("not a git checkout")
+    log = rows(train(config("epochs=1"), tmp_path))
     assert log[0]["code_commit"].removesuffix("+dirty") == commit.stdout.strip()
     assert float(log[0]["load_avg"]) >= 0.0
 
