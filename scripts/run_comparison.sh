@@ -27,12 +27,12 @@ seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${
   SEED_ORDER="1 2 0" seeds +comparison=pick_place_standard sampler=cper replay.strategy=past
   seeds +comparison=push_standard sampler=cper replay.strategy=past          # 28.2 A Push: CPER
   SEED_ORDER="2 0 1" seeds +comparison=slide_standard sampler=her            # 28.3 A Slide, 70-step episodes
-  # 28.4 A Push: the other baselines. EBP and MEP take no IS weights, so the loss fix of 2026-12-06 leaves them as
-  # they were; PER's first runs fed no TD errors back to the per-worker shards, and were discarded.
-  seeds +comparison=push_standard sampler=ebp
   # The figure's CEBP again with baselines' weighted critic loss, mean(w * delta^2) (2026-12-06): its runs before
   # are in -wnorm folders. Push first, the panel where the paper's C-Energy leads HER most.
   seeds +comparison=push_standard sampler=cebp_initial
+  # 28.4 A Push: the other baselines. EBP and MEP take no IS weights, so the loss fix of 2026-12-06 leaves them as
+  # they were; PER's first runs fed no TD errors back to the per-worker shards, and were discarded.
+  seeds +comparison=push_standard sampler=ebp
   seeds +comparison=push_standard sampler=mep
   seeds +comparison=push_standard sampler=per
   seeds +comparison=pick_place_standard sampler=cebp_initial
