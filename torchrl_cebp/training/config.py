@@ -263,8 +263,7 @@ def check_same_run(saved: dict, cfg: DictConfig) -> None:
 RESUME_HINTS = {
     "sampler.beta_anneal_draws": (
         " (PER anneals beta over schedule_epochs, which follows epochs unless set, so more epochs change its "
-        "schedule; to extend the run "
-        "on the checkpoint's schedule, add the override sampler.beta_anneal_draws={was})"
+        "schedule; to extend the run on the checkpoint's schedule, add the override sampler.beta_anneal_draws={was})"
     ),
 }
 
