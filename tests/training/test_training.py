@@ -255,8 +255,12 @@ def test_released_robot_trains_and_names_its_run_folder(tmp_path, env):
 
 
 def test_capacity_below_one_cycle_and_bad_cebp_parameters_are_named_before_any_env_starts(tmp_path):
-    with pytest.raises(ConfigError, match=r"replay.capacity=700: .* needs at least 800 transitions"):
-        train(config("preset=paper", "replay.capacity=700"), tmp_path / "capacity")  # 16 episodes of 50 steps
+    with pytest.raises(ConfigError, match=r"replay.capacity=700: smaller than one cycle's .* at least 800 transitions"):
+        train(config("preset=paper", "replay.capacity=700", "replay.capacity_per=total"), tmp_path / "capacity")
+    with pytest.raises(ConfigError, match=r"replay.capacity=99: smaller than a worker's .* at least 100 transitions"):
+        train(config("preset=paper", "replay.capacity=99"), tmp_path / "capacity")  # 2 episodes of 50 steps each
+    with pytest.raises(ConfigError, match=r"replay.capacity_per='shard': must be one of \['worker', 'total'\]"):
+        train(config("replay.capacity_per=shard"), tmp_path / "capacity")
     with pytest.raises(Exception, match=r"temperature=-1.0: must be a positive number"):
         train(config("sampler=cebp", "sampler.temperature=-1.0"), tmp_path / "temperature")
     with pytest.raises(Exception, match=r"scale=0.0: must be a positive number"):
@@ -457,6 +461,24 @@ def test_every_row_names_the_replay_layout_that_ran(tmp_path, workers, per_worke
         assert [shard.n_episodes for shard in sampler.samplers] == [0, 0]
 
 
+def test_a_checkpoint_from_before_capacity_per_resumes_with_the_shared_capacity_it_had():
+    saved = OmegaConf.to_container(config("preset=paper"), resolve=True)
+    del saved["replay"]["capacity_per"]
+    check_same_run(saved, config("preset=paper", "replay.capacity_per=total"))
+    with pytest.raises(ConfigError, match=r"made with replay.capacity_per='total', this config has "
+                                          r"replay.capacity_per='worker' \(runs made before .* add the override "
+                                          r"replay.capacity_per=total\)"):
+        check_same_run(saved, config("preset=paper"))
+    one_worker = OmegaConf.to_container(config(), resolve=True)
+    del one_worker["replay"]["capacity_per"]
+    check_same_run(one_worker, config())  # one worker's capacity is the total: nothing to refuse
+
+
+def test_the_comparisons_keep_the_shared_capacity_their_runs_began_with():
+    assert config("+comparison=push_standard").replay.capacity_per == "total"
+    assert config("preset=paper").replay.capacity_per == "worker"
+
+
 def test_a_checkpoint_from_before_per_worker_replay_resumes_only_as_merged():
     saved = {key: value for key, value in OmegaConf.to_container(config("workers=2"), resolve=True).items()}
     del saved["replay"]["per_worker"]
@@ -530,16 +552,37 @@ def test_episode_steps_give_slide_and_the_franka_their_own_length_and_folder():
     assert episode_steps(config("env=franka_pick_place")) == 100
 
 
-@pytest.mark.parametrize(("workers", "per_worker", "capacities"), [
-    (1, "true", [1_000_020]), (2, "false", [1_000_020]), (8, "true", [125_020] * 8)])
-def test_a_per_holds_priorities_for_every_transition_of_70_step_episodes(workers, per_worker, capacities):
-    # 1e6 transitions of 70-step Slide episodes are 14,286 rows (TorchRL rounds up): 1,000,020 transitions.
+@pytest.mark.parametrize(("workers", "per_worker", "capacity_per", "capacities", "storage"), [
+    (1, "true", "worker", [1_000_020], 1_000_020), (1, "true", "total", [1_000_020], 1_000_020),
+    (2, "false", "total", [1_000_020], 1_000_020), (2, "false", "worker", [2_000_040], 2_000_040),
+    (8, "true", "total", [125_020] * 8, 1_000_020), (8, "true", "worker", [1_000_020] * 8, 8_000_160),
+])
+def test_a_per_holds_priorities_for_every_transition_of_70_step_episodes(workers, per_worker, capacity_per,
+                                                                          capacities, storage):
+    # 1e6 transitions of 70-step Slide episodes are 14,286 rows (TorchRL rounds up): 1,000,020 transitions,
+    # shared by the workers or each worker's own (as each of baselines' MPI workers has its own 1e6).
     cfg = config("sampler=per", "env=slide", "env.episode_steps=70", f"workers={workers}",
-                 f"replay.per_worker={per_worker}", "replay.capacity=1000000")
+                 f"replay.per_worker={per_worker}", "replay.capacity=1000000", f"replay.capacity_per={capacity_per}")
     sampler = make_sampler(cfg)
     shards = sampler.samplers if isinstance(sampler, PerWorkerSampler) else [sampler]
     assert [shard.max_size for shard in shards] == capacities
     env = make_env(cfg)
     replay, _ = make_replay(cfg, sampler, env)  # the buffer accepts them: its storage rounds alike
     env.close()
-    assert replay.storage.max_size == 1_000_020
+    assert replay.storage.max_size == storage
+
+
+@pytest.mark.parametrize(("capacity_per", "episodes_kept"), [("total", [2, 2]), ("worker", [4, 4])])
+def test_each_worker_keeps_its_own_capacity_of_episodes_when_capacity_is_per_worker(tmp_path, capacity_per,
+                                                                                     episodes_kept):
+    # Two workers, two 50-step episodes each per cycle, 200 transitions: shared, one cycle fills the storage and
+    # each worker keeps its last 2 episodes; per worker, each keeps 4 (its last two cycles).
+    cfg = config("workers=2", "epochs=1", "cycles_per_epoch=3", "replay.capacity=200",
+                 f"replay.capacity_per={capacity_per}", "sampler=per")
+    train(cfg, tmp_path)
+    state = load_checkpoint(tmp_path)
+    sampler = make_sampler(cfg)
+    replay, _ = make_replay(cfg, sampler, make_env(cfg))
+    replay.load_state_dict(state["replay"])
+    assert [len(view) // 50 for view in sampler.worker_views(replay.storage)] == episodes_kept
+    assert len(replay) == sum(episodes_kept) * 50

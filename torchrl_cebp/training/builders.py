@@ -126,9 +126,25 @@ def replay_layout(cfg: DictConfig) -> str:
 
 def replay_capacity(cfg: DictConfig) -> int:
     """The transitions the replay's storage holds: ``replay.capacity`` rounded up to whole episodes of the task, as
-    TorchRL's episode storage rounds it (:func:`~torchrl_cebp.replay.episode_rows`; 70-step Slide: 1,000,020)."""
+    TorchRL's episode storage rounds it (:func:`~torchrl_cebp.replay.episode_rows`; 70-step Slide: 1,000,020).
+
+    With ``replay.capacity_per: worker`` and several workers, each worker holds ``replay.capacity`` of its own, as
+    each of baselines' MPI workers holds its own 1e6: the storage holds ``workers`` times that, each worker's share
+    rounded up to whole cycles of its ``rollouts_per_cycle`` episodes so that the workers' shares are equal.
+
+    Example:
+        >>> from omegaconf import OmegaConf
+        >>> cfg = OmegaConf.create({"workers": 8, "rollouts_per_cycle": 2, "env": {"episode_steps": 70},
+        ...                         "replay": {"capacity": 1_000_000, "capacity_per": "total"}})
+        >>> replay_capacity(cfg), replay_capacity(OmegaConf.merge(cfg, {"replay": {"capacity_per": "worker"}}))
+        (1000020, 8000160)
+    """
     steps = episode_steps(cfg)
-    return episode_rows(cfg.replay.capacity, steps) * steps
+    rows = episode_rows(cfg.replay.capacity, steps)
+    if cfg.replay.get("capacity_per", "total") == "worker" and cfg.workers > 1:
+        cycles = -(rows // -cfg.rollouts_per_cycle)
+        rows = cycles * cfg.rollouts_per_cycle * cfg.workers
+    return rows * steps
 
 
 def worker_share(capacity: int, episode_steps: int, workers: int, episodes_per_worker: int) -> int:
@@ -145,9 +161,8 @@ def make_sampler(cfg: DictConfig) -> Sampler:
     """The replay sampler of ``cfg.sampler``; with per-worker replay, one per worker inside a :class:`PerWorkerSampler`.
 
     Worker ``w`` gets the episodes of its ``rollouts_per_cycle`` envs. A PER (one, or a worker's shard) holds
-    priorities for every transition its rows of the storage hold: ``replay.capacity`` rounded up to whole episodes,
-    as TorchRL's storage rounds it (:func:`~torchrl_cebp.replay.episode_rows`). A shard with a ``seed`` (MEP's
-    density model) gets one of its own.
+    priorities for every transition its rows of the storage hold (:func:`replay_capacity`); the ``capacity`` of its
+    config only says that it takes one. A shard with a ``seed`` (MEP's density model) gets one of its own.
 
     Example:
         >>> from omegaconf import OmegaConf
@@ -162,7 +177,7 @@ def make_sampler(cfg: DictConfig) -> Sampler:
     for worker in range(workers):
         own = {}
         if "capacity" in cfg.sampler:
-            own["capacity"] = worker_share(cfg.sampler.capacity, episode_steps(cfg), workers, cfg.rollouts_per_cycle)
+            own["capacity"] = worker_share(replay_capacity(cfg), episode_steps(cfg), workers, cfg.rollouts_per_cycle)
         if "seed" in cfg.sampler and per_worker:
             own["seed"] = derive_seed(cfg.sampler.seed, worker)
         shards.append(instantiate(cfg.sampler, **own))

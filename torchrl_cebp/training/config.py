@@ -17,6 +17,7 @@ from torchrl_cebp.training.metrics import LOGGERS
 
 DEVICES = ("auto", "cpu", "cuda")
 PRECISIONS = ("fp32", "bf16")
+CAPACITY_PER = ("worker", "total")
 
 # ``${mul:a,b,...}`` lets a config derive a count, e.g. PER's beta-annealing horizon.
 if not OmegaConf.has_resolver("mul"):
@@ -124,6 +125,7 @@ def validate_config(cfg: DictConfig) -> None:
     one_of("precision", PRECISIONS)
     one_of("logger", LOGGERS)
     one_of("replay.strategy", STRATEGIES)
+    one_of("replay.capacity_per", CAPACITY_PER)
     check("seed", lambda v: _is_int(v) and v >= 0, "a non-negative integer")
     for key in (
         "workers", "epochs", "schedule_epochs", "cycles_per_epoch", "rollouts_per_cycle", "updates_per_cycle",
@@ -172,11 +174,15 @@ def _collection_errors(cfg: DictConfig) -> list[str]:
     n_envs = episodes_per_cycle(cfg)
     steps = episode_steps(cfg)
     capacity = OmegaConf.select(cfg, "replay.capacity")
-    if steps is not None and _is_int(capacity) and capacity < n_envs * steps:
-        errors.append(
-            f"  replay.capacity={capacity}: smaller than one cycle's episodes; "
-            f"needs at least {n_envs * steps} transitions (rollouts_per_cycle x workers x {steps} steps)"
-        )
+    if OmegaConf.select(cfg, "replay.capacity_per") == "worker":
+        filled, counted = cfg.rollouts_per_cycle * steps if steps else None, f"rollouts_per_cycle x {steps} steps"
+        whose = "a worker's episodes of one cycle"
+    else:
+        filled, counted = n_envs * steps if steps else None, f"rollouts_per_cycle x workers x {steps} steps"
+        whose = "one cycle's episodes"
+    if filled is not None and _is_int(capacity) and capacity < filled:
+        errors.append(f"  replay.capacity={capacity}: smaller than {whose}; needs at least {filled} transitions "
+                      f"({counted})")
     processes = cfg.get("collector_processes")
     if _is_int(processes) and processes > 0 and n_envs % processes:
         errors.append(f"  collector_processes={processes}: must divide the {n_envs} episodes of a cycle "
@@ -214,7 +220,8 @@ RUN_DEFINING_KEYS = (
 # merged the workers' episodes into one buffer, those before env.episode_steps ran the task's own length, and
 # those before env.grasped_start started every episode from the table.
 LEGACY_DEFAULTS: dict[tuple[str, str], object] = {
-    ("replay", "per_worker"): False, ("env", "episode_steps"): None, ("env", "grasped_start"): 0.0,
+    ("replay", "per_worker"): False, ("replay", "capacity_per"): "total", ("env", "episode_steps"): None,
+    ("env", "grasped_start"): 0.0,
 }
 
 
@@ -223,13 +230,20 @@ def with_legacy_defaults(saved: dict) -> dict:
 
     Example:
         >>> with_legacy_defaults({"replay": {"capacity": 10}})["replay"]
-        {'capacity': 10, 'per_worker': False}
+        {'capacity': 10, 'per_worker': False, 'capacity_per': 'total'}
     """
     saved = {**saved}
     for (group, key), value in LEGACY_DEFAULTS.items():
         if isinstance(saved.get(group), dict) and key not in saved[group]:
             saved[group] = {**saved[group], key: value}
     return saved
+
+
+def _as_run(config: dict) -> dict:
+    """``config`` with the settings that change nothing in its run made equal: one worker's capacity is the total."""
+    if config.get("workers") == 1 and isinstance(config.get("replay"), dict) and "capacity_per" in config["replay"]:
+        return {**config, "replay": {**config["replay"], "capacity_per": "worker"}}
+    return config
 
 
 def check_same_run(saved: dict, cfg: DictConfig) -> None:
@@ -247,8 +261,8 @@ def check_same_run(saved: dict, cfg: DictConfig) -> None:
         ...     print(err)
         cannot resume: the checkpoint was made with seed=0, this config has seed=1; the checkpoint was made with agent.lr=0.001, this config has agent.lr=0.01
     """
-    current = OmegaConf.to_container(cfg, resolve=True)
-    saved = with_legacy_defaults(saved)
+    current = _as_run(OmegaConf.to_container(cfg, resolve=True))
+    saved = _as_run(with_legacy_defaults(saved))
     differences = [
         f"the checkpoint was made with {path}={was!r}, this config has {path}={now!r}"
         + RESUME_HINTS.get(path, "").format(was=was)
@@ -259,8 +273,12 @@ def check_same_run(saved: dict, cfg: DictConfig) -> None:
         raise ConfigError("cannot resume: " + "; ".join(differences))
 
 
-# Why a setting that follows epochs changes when a run is extended, and how to keep the checkpoint's value.
+# Why a setting differs from a checkpoint's (a new default, or one that follows epochs), and how to keep its value.
 RESUME_HINTS = {
+    "replay.capacity_per": (
+        " (runs made before replay.capacity_per existed shared replay.capacity among their workers; to resume one, "
+        "add the override replay.capacity_per={was})"
+    ),
     "sampler.beta_anneal_draws": (
         " (PER anneals beta over schedule_epochs, which follows epochs unless set, so more epochs change its "
         "schedule; to extend the run on the checkpoint's schedule, add the override sampler.beta_anneal_draws={was})"
