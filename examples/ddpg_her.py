@@ -26,7 +26,9 @@ from torchrl.envs.utils import ExplorationType
 import torchrl_cebp.training.config  # noqa: F401  (registers the config's resolvers)
 from torchrl_cebp.envs import compute_reward_of
 from torchrl_cebp.replay import EpisodeWriter, HindsightRelabel, make_replay_buffer
-from torchrl_cebp.training.builders import TaskDims, make_agent, make_env, make_optimizer, make_sampler
+from torchrl_cebp.training.builders import (
+    TaskDims, make_agent, make_env, make_optimizer, make_sampler, replay_capacity,
+)
 from torchrl_cebp.training.trainer import RelabelledTransitions, beta_annealing
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -77,7 +79,7 @@ def main(argv: list[str] | None = None) -> tuple[TensorDictReplayBuffer, TensorD
 
     sampler = make_sampler(cfg)
     her = HindsightRelabel(compute_reward_of(train_env), future_p=cfg.replay.future_p, strategy=cfg.replay.strategy)
-    replay_buffer = make_replay_buffer(sampler, her, capacity=cfg.replay.capacity, batch_size=args.batch_size,
+    replay_buffer = make_replay_buffer(sampler, her, capacity=replay_capacity(cfg), batch_size=args.batch_size,
                                        writer=EpisodeWriter(dims.episode_steps))
     # HER's normaliser learns from the relabelled transitions of each new episode, as baselines' does.
     normalizer_feed = RelabelledTransitions(her)

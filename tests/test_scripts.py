@@ -57,3 +57,13 @@ def test_pending_runs_skips_a_run_only_once_its_committed_csv_holds_all_its_epoc
     )
     assert out.stdout.splitlines() == [f"{stage} seed=1", f"{stage} seed=2"]
     assert "skipped, 20 of 20 epochs committed: pick_place-standard/her/paper/seed0" in out.stderr
+
+
+def test_the_sim2real_training_script_resumes_the_shipped_policys_run_with_its_shared_replay():
+    out = subprocess.run(["bash", "scripts/run_sim2real_training.sh"], cwd=REPO, capture_output=True, text=True,
+                         check=True, env={**os.environ, "PYTHON": "echo"})
+    overrides = out.stdout.split()[1:]
+    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
+        cfg = compose("config", overrides=overrides)
+    validate_config(cfg)
+    assert cfg.replay.capacity_per == "total" and cfg.resume and cfg.workers == 8

@@ -1,4 +1,5 @@
 """Episode storage and buffer: wrap-around, checkpoints, and errors that name the key."""
+import os
 import numpy as np
 import pytest
 import torch
@@ -206,3 +207,33 @@ def test_a_per_smaller_than_its_storage_rounded_to_whole_episodes_is_refused_at_
     rb = make_replay_buffer(PERSampler(capacity), HindsightRelabel(sparse_reward), capacity=capacity)
     with pytest.raises(ValueError, match=rf"holds {capacity} transitions, but its storage holds {5 * T} .*capacity={5 * T}"):
         rb.extend(make_episodes(2))
+
+
+def _resident_mib() -> float:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+@pytest.mark.parametrize("how", ["written", "restored"])
+def test_the_rows_not_yet_filled_take_no_memory(how):
+    # A storage of ~600 MiB holding 2 episodes, as a run's 8e6-transition replay (replay.capacity_per=worker) starts
+    # out: only the written rows may become resident, after a write or after a restore from a checkpoint's state.
+    episodes = make_episodes(2)
+    transition_bytes = sum(leaf[0, 0].numel() * leaf.element_size() for leaf in episodes.values(True, True))
+    capacity = (600 * 2**20 // transition_bytes // T) * T
+
+    def buffer():
+        return make_replay_buffer(None, HindsightRelabel(sparse_reward), capacity=capacity, batch_size=64)
+
+    saved = buffer()
+    before = _resident_mib()
+    saved.extend(episodes)
+    if how == "restored":
+        state = saved.state_dict()
+        restored = buffer()
+        before = _resident_mib()
+        restored.load_state_dict(state)
+        saved = restored
+    saved.sample()
+    assert _resident_mib() - before < 60, f"{_resident_mib() - before:.0f} MiB resident for 2 episodes"
+    assert saved.storage.max_size == capacity and len(saved) == 2 * T

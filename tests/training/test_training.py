@@ -19,6 +19,7 @@ from torchrl_cebp.samplers import PerWorkerSampler
 from torchrl_cebp.training.config import check_same_run, env_label, warn_if_bf16_is_emulated
 from torchrl_cebp.training.builders import (
     TaskDims, derive_seed, episode_steps, make_agent, make_env, make_replay, make_sampler, make_training_collector,
+    replay_capacity, worker_share,
 )
 from torchrl_cebp.training.checkpoint import BEST_POLICY_NAME, BestPolicy, stored_episodes, CHECKPOINT_NAME, POLICY_NAME
 from torchrl_cebp.training.evaluation import evaluate_success_rate
@@ -466,16 +467,24 @@ def test_a_checkpoint_from_before_capacity_per_resumes_with_the_shared_capacity_
     del saved["replay"]["capacity_per"]
     check_same_run(saved, config("preset=paper", "replay.capacity_per=total"))
     with pytest.raises(ConfigError, match=r"made with replay.capacity_per='total', this config has "
-                                          r"replay.capacity_per='worker' \(runs made before .* add the override "
-                                          r"replay.capacity_per=total\)"):
+                                          r"replay.capacity_per='worker' \(to resume .* add the override "
+                                          r"replay.capacity_per=total; runs made before"):
         check_same_run(saved, config("preset=paper"))
     one_worker = OmegaConf.to_container(config(), resolve=True)
     del one_worker["replay"]["capacity_per"]
     check_same_run(one_worker, config())  # one worker's capacity is the total: nothing to refuse
+    check_same_run(OmegaConf.to_container(config("replay.capacity_per=total"), resolve=True), config())
+    new = OmegaConf.to_container(config("preset=paper"), resolve=True)
+    with pytest.raises(ConfigError, match=r"made with replay.capacity_per='worker', .* add the override "
+                                          r"replay.capacity_per=worker;"):
+        check_same_run(new, config("+comparison=push_standard"))
 
 
-def test_the_comparisons_keep_the_shared_capacity_their_runs_began_with():
-    assert config("+comparison=push_standard").replay.capacity_per == "total"
+@pytest.mark.parametrize("comparison", sorted(path.stem for path in (REPO / "conf" / "comparison").glob("*.yaml")))
+def test_the_comparisons_keep_the_shared_capacity_their_runs_began_with(comparison):
+    # Slide's 50-epoch stage has no runs yet, and would fill a worker's 1/8 from epoch 25.
+    expected = "worker" if comparison == "slide" else "total"
+    assert config(f"+comparison={comparison}").replay.capacity_per == expected
     assert config("preset=paper").replay.capacity_per == "worker"
 
 
@@ -572,6 +581,13 @@ def test_a_per_holds_priorities_for_every_transition_of_70_step_episodes(workers
     assert replay.storage.max_size == storage
 
 
+def test_each_workers_own_capacity_is_rounded_up_to_whole_cycles_of_its_episodes():
+    # 1e6 transitions are 14,286 rows of 70 steps; in whole cycles of a worker's 4 episodes, 14,288.
+    cfg = config("preset=paper", "env=slide", "env.episode_steps=70", "rollouts_per_cycle=4", "replay.capacity=1000000")
+    assert replay_capacity(cfg) == 8 * 14_288 * 70
+    assert worker_share(replay_capacity(cfg), 70, 8, 4) == 14_288 * 70
+
+
 @pytest.mark.parametrize(("capacity_per", "episodes_kept"), [("total", [2, 2]), ("worker", [4, 4])])
 def test_each_worker_keeps_its_own_capacity_of_episodes_when_capacity_is_per_worker(tmp_path, capacity_per,
                                                                                      episodes_kept):
@@ -582,7 +598,10 @@ def test_each_worker_keeps_its_own_capacity_of_episodes_when_capacity_is_per_wor
     train(cfg, tmp_path)
     state = load_checkpoint(tmp_path)
     sampler = make_sampler(cfg)
-    replay, _ = make_replay(cfg, sampler, make_env(cfg))
+    env = make_env(cfg)
+    replay, _ = make_replay(cfg, sampler, env)
+    env.close()
     replay.load_state_dict(state["replay"])
     assert [len(view) // 50 for view in sampler.worker_views(replay.storage)] == episodes_kept
     assert len(replay) == sum(episodes_kept) * 50
+    assert rows(tmp_path / "progress.csv")[0]["replay_capacity"] == str(len(replay))  # 3 cycles filled it

@@ -122,11 +122,15 @@ class _EpisodeRows:
     def _read_lengths_if_unknown(self) -> None:
         if self._lengths is None:  # restored from a checkpoint: read them from the flags once
             stored = _upstream.stored_tensordict(self)
+            rows, row_length = stored.shape[:2]
             if self.row_writes is None:  # restored without a write
-                self.row_writes = RowWrites(stored.shape[0])
+                self.row_writes = RowWrites(rows)
             self._lengths_watch = self.row_writes.watch()
-            self._lengths = episode_lengths(stored, self.end_key)
-            # Unwritten rows hold no end flag, so they count as full rows: one check covers the filled ones.
+            # Only the filled rows are read: the others were never written, so their memory is never touched.
+            # Counted as full rows, they leave one check to cover the filled ones.
+            filled = self.shape[0]
+            self._lengths = torch.full((rows,), row_length, dtype=torch.long)
+            self._lengths[:filled] = episode_lengths(stored[:filled], self.end_key)
             self._common_length = common_length(self._lengths)
             return
         rows = self._lengths_watch.new_rows()
@@ -190,10 +194,14 @@ class _EpisodeRows:
             rows = state_dict.get("rows", saved.shape[0])
             self._adopt_saved_rows(rows, saved.shape[1])
             if "rows" in state_dict:  # the filled rows, back into a storage of the full capacity
-                full = saved.apply(lambda t: torch.zeros((rows, *t.shape[1:]), dtype=t.dtype),
+                # Empty, not zeros: the unfilled rows' memory stays untouched until written.
+                full = saved.apply(lambda t: torch.empty((rows, *t.shape[1:]), dtype=t.dtype),
                                    batch_size=[rows, *saved.shape[1:]])
                 full[: saved.shape[0]] = saved
                 state_dict = {**state_dict, _upstream.STORAGE_STATE_KEY: full.state_dict()}
+                # TorchRL loads into a stored tensordict by reference, where into none it clones every row (all of
+                # the capacity's memory); ``full`` is this storage's own, so nothing else holds it.
+                _upstream.replace_stored_tensordict(self, TensorDict())
         super().load_state_dict(state_dict)
         self._lengths = None
 
@@ -300,9 +308,10 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
                 for dtype, width in widths.items()
             }
             packed = TensorDict(batch_size=storage.shape, device=storage.device)
+            filled = self.shape[0]  # only these are copied: the rest of the blocks' memory stays untouched
             for field in fields:
                 view = field.from_columns(blocks[field.dtype][..., field.start : field.stop])
-                view.copy_(storage.get(field.key))
+                view[:filled].copy_(storage.get(field.key)[:filled])
                 packed.set(field.key, view)
             _upstream.replace_stored_tensordict(self, packed)
             self._layout_source = packed

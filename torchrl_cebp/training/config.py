@@ -276,8 +276,8 @@ def check_same_run(saved: dict, cfg: DictConfig) -> None:
 # Why a setting differs from a checkpoint's (a new default, or one that follows epochs), and how to keep its value.
 RESUME_HINTS = {
     "replay.capacity_per": (
-        " (runs made before replay.capacity_per existed shared replay.capacity among their workers; to resume one, "
-        "add the override replay.capacity_per={was})"
+        " (to resume the checkpoint's run, add the override replay.capacity_per={was}; runs made before the setting "
+        "existed shared replay.capacity among their workers)"
     ),
     "sampler.beta_anneal_draws": (
         " (PER anneals beta over schedule_epochs, which follows epochs unless set, so more epochs change its "

@@ -35,6 +35,7 @@ from torchrl_cebp.training.builders import (
     make_replay,
     make_sampler,
     make_training_collector,
+    replay_capacity,
     replay_layout,
 )
 from torchrl_cebp.training.checkpoint import (
@@ -222,7 +223,8 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         state = load_checkpoint(run_dir, map_location=device)
         start_epoch, wall_before = restore_training_state(state, cfg, agent, optimizer, replay, learner.beta_scheduler)
     best_policy = BestPolicy(run_dir, resume=resuming)
-    log = EpochLog(run_dir, start_epoch, cfg.logger, labels={"replay": replay_layout(cfg), "her_strategy": cfg.replay.strategy})
+    labels = {"replay": replay_layout(cfg), "replay_capacity": replay_capacity(cfg), "her_strategy": cfg.replay.strategy}
+    log = EpochLog(run_dir, start_epoch, cfg.logger, labels=labels)
     run_start = time.perf_counter()
 
     progress = tqdm(range(start_epoch, cfg.epochs), initial=start_epoch, total=cfg.epochs, desc="epochs")
