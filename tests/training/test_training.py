@@ -23,6 +23,7 @@ from torchrl_cebp.training.builders import (
 )
 from torchrl_cebp.training.checkpoint import BEST_POLICY_NAME, BestPolicy, stored_episodes, CHECKPOINT_NAME, POLICY_NAME
 from torchrl_cebp.training.evaluation import evaluate_success_rate
+from torchrl_cebp.training.metrics import RUN_SOURCES
 from torchrl_cebp.training.trainer import TEST_STREAM, RelabelledTransitions
 
 REPO = Path(__file__).resolve().parents[2]
@@ -396,12 +397,17 @@ def test_unknown_logger_is_refused_with_the_valid_ones():
 
 
 def test_every_row_names_the_commit_it_ran_on(tmp_path):
-    # Read before the run: a results sync committing while the run trains moves HEAD, not the run's code.
-    commit = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=REPO, capture_output=True, text=True)
-    if commit.returncode != 0:
+    if subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True).returncode != 0:
         pytest.skip("not a git checkout")
     log = rows(train(config("epochs=1"), tmp_path))
-    assert log[0]["code_commit"].removesuffix("+dirty") == commit.stdout.strip()
+    commit = log[0]["code_commit"].removesuffix("+dirty")
+
+    def git(*args: str) -> int:
+        return subprocess.run(["git", *args], cwd=REPO, capture_output=True).returncode
+
+    # The commit is read once per process, so results syncs may have moved HEAD since; never the run's code.
+    assert git("merge-base", "--is-ancestor", commit, "HEAD") == 0, commit
+    assert git("diff", "--quiet", commit, "HEAD", "--", *RUN_SOURCES) == 0, f"the run's code changed since {commit}"
     assert float(log[0]["load_avg"]) >= 0.0
 
 
