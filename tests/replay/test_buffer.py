@@ -235,5 +235,6 @@ def test_the_rows_not_yet_filled_take_no_memory(how):
         restored.load_state_dict(state)
         saved = restored
     saved.sample()
-    assert _resident_mib() - before < 60, f"{_resident_mib() - before:.0f} MiB resident for 2 episodes"
+    added = _resident_mib() - before
+    assert added < 60, f"{added:.0f} MiB resident for 2 episodes"
     assert saved.storage.max_size == capacity and len(saved) == 2 * T

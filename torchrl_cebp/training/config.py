@@ -174,15 +174,12 @@ def _collection_errors(cfg: DictConfig) -> list[str]:
     n_envs = episodes_per_cycle(cfg)
     steps = episode_steps(cfg)
     capacity = OmegaConf.select(cfg, "replay.capacity")
-    if OmegaConf.select(cfg, "replay.capacity_per") == "worker":
-        filled, counted = cfg.rollouts_per_cycle * steps if steps else None, f"rollouts_per_cycle x {steps} steps"
-        whose = "a worker's episodes of one cycle"
-    else:
-        filled, counted = n_envs * steps if steps else None, f"rollouts_per_cycle x workers x {steps} steps"
-        whose = "one cycle's episodes"
-    if filled is not None and _is_int(capacity) and capacity < filled:
-        errors.append(f"  replay.capacity={capacity}: smaller than {whose}; needs at least {filled} transitions "
-                      f"({counted})")
+    own = OmegaConf.select(cfg, "replay.capacity_per") == "worker"  # a worker's episodes of a cycle must fit
+    episodes, whose, factors = ((cfg.rollouts_per_cycle, "a worker's episodes of one cycle", "rollouts_per_cycle") if own
+                                else (n_envs, "one cycle's episodes", "rollouts_per_cycle x workers"))
+    if steps is not None and _is_int(capacity) and capacity < episodes * steps:
+        errors.append(f"  replay.capacity={capacity}: smaller than {whose}; needs at least {episodes * steps} "
+                      f"transitions ({factors} x {steps} steps)")
     processes = cfg.get("collector_processes")
     if _is_int(processes) and processes > 0 and n_envs % processes:
         errors.append(f"  collector_processes={processes}: must divide the {n_envs} episodes of a cycle "
