@@ -37,5 +37,9 @@ seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${
   seeds +comparison=push_standard sampler=per
   seeds +comparison=pick_place_standard sampler=cebp_initial
   seeds +comparison=slide_standard sampler=cebp_initial
+  # Beyond the matrix (2026-12-06): the figure's CEBP on Push with its IS weights off (beta 0). EBP, which weights
+  # nothing, leads HER by 2.4x where cebp_initial is level with it: is it the priorities or the weights?
+  seeds +comparison=push_standard sampler=cebp_initial sampler.beta=0 \
+    'hydra.run.dir=runs/push-standard/cebp_initial/paper-per_worker-beta0/seed${seed}'
 } | if [ "${SKIP_COMMITTED:-1}" = 1 ]; then "${FILTER_PYTHON:-.venv/bin/python}" scripts/pending_runs.py; else cat; fi \
   | xargs -r -P "${JOBS:-1}" -L 1 bash -c 'run "$@"' run   # -r: an empty queue runs nothing, not a default train.py

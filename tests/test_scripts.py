@@ -7,6 +7,7 @@ from collections import Counter
 from pathlib import Path
 
 from hydra import compose, initialize_config_dir
+from hydra.core.hydra_config import HydraConfig
 
 from torchrl_cebp.training.config import validate_config
 
@@ -28,9 +29,15 @@ def test_run_comparison_queues_one_valid_run_per_stage_and_seed():
     assert all(sum(o.startswith("seed=") for o in run) == 1 for run in runs)
     stages = Counter(" ".join(o for o in run if not o.startswith("seed=")) for run in runs)
     assert set(stages.values()) == {3} and Counter(seeds) == {f"seed={s}": len(stages) for s in range(3)}
+    folders = []
     with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
         for run in runs:
-            validate_config(compose("config", overrides=run))  # every stage and sampler exists, every value is allowed
+            cfg = compose("config", overrides=run, return_hydra_config=True)
+            validate_config(cfg)  # every stage and sampler exists, every value is allowed
+            HydraConfig.instance().set_config(cfg)  # the folder's name reads hydra:runtime.choices
+            folders.append(cfg.hydra.run.dir)
+    # A stage that differs from another by a sampler value alone must name its own folder, or it resumes the other's.
+    assert len(set(folders)) == len(runs), Counter(folders).most_common(1)
 
 
 def test_run_comparison_runs_nothing_once_every_run_is_committed(tmp_path):
