@@ -186,6 +186,11 @@ def test_ebp_frequencies():
     assert_frequencies(counts(rb), trajectory ** (1 / 1.01) + np.finfo(np.float32).eps)
 
 
+def mep_probabilities(scores):
+    """The paper code's draw (HER_force's ``entropy`` mode): dense ranks from 0, plus 0.001, to the power 1/1.01."""
+    return (rankdata(scores, method="dense") - 1 + 0.001) ** (1 / 1.01)
+
+
 def test_mep_ranks_rare_trajectories_higher():
     sampler = MEPSampler(seed=0)
     rb, data = buffer(sampler)
@@ -193,17 +198,41 @@ def test_mep_ranks_rare_trajectories_higher():
     sampler.refit(rb.storage)
     pos = np.concatenate([data["achieved_goal"][:, :1].double().numpy(), data["next", "achieved_goal"].double().numpy()], 1)
     scores = -sampler._mixture.score_samples(pos.reshape(N_EPISODES, -1))
-    assert_frequencies(counts(rb), rankdata(scores, method="dense") ** (1 / 1.01))
+    assert_frequencies(counts(rb), mep_probabilities(scores))
 
 
-def test_mep_scores_new_episodes_against_last_refit():
+def test_mep_reranks_the_whole_buffer_on_every_write():
+    sampler = MEPSampler(seed=0)
+    rb, data = buffer(sampler)
+    sampler.refit(rb.storage)
+    new = hand_made(3, seed=7)
+    new["next", "achieved_goal"][0] += 0.5  # far from anything fitted: the rarest
+    new["next", "achieved_goal"][1] += 0.25
+    rb.extend(new)
+    both = torch.cat([data, new])
+    pos = np.concatenate([both["achieved_goal"][:, :1].double().numpy(),
+                          both["next", "achieved_goal"].double().numpy()], 1).reshape(len(both), -1)
+    scores = -sampler._mixture.score_samples(pos)
+    fitted_lowest = scores[:N_EPISODES].min()
+    # Scores below the fit's lowest tie with it at rank 0, as the paper's code clips them there.
+    expected = mep_probabilities(np.clip(scores - fitted_lowest, 0, None))
+    assert torch.allclose(sampler._priorities[: len(both)], torch.from_numpy(expected))
+    # The two novel episodes rank above every fitted one, each at a rank of its own.
+    assert sampler._priorities[N_EPISODES] > sampler._priorities[N_EPISODES + 1] > sampler._priorities[:N_EPISODES].max()
+
+
+def test_mep_state_round_trip_keeps_the_ranks_of_later_writes():
     sampler = MEPSampler(seed=0)
     rb, _ = buffer(sampler)
     sampler.refit(rb.storage)
-    before = sampler._priorities[:N_EPISODES].clone()
-    rb.extend(hand_made(2, seed=7))
-    assert torch.equal(sampler._priorities[:N_EPISODES], before)
-    assert (sampler._priorities[N_EPISODES:N_EPISODES + 2] >= 1).all()
+    copy_ = MEPSampler(seed=0)
+    copy_.load_state_dict(sampler.state_dict())
+    more = hand_made(2, seed=3)
+    rb.extend(more)
+    copy_.write_priorities(torch.arange(N_EPISODES, N_EPISODES + 2), more)
+    assert torch.equal(copy_._priorities, sampler._priorities)
+    with pytest.raises(ValueError, match="start the run again"):
+        MEPSampler().load_state_dict({k: v for k, v in sampler.state_dict().items() if k != "scores"})
 
 
 def test_per_new_transitions_at_max_priority_then_td_error():

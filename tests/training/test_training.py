@@ -24,7 +24,7 @@ from torchrl_cebp.training.builders import (
 from torchrl_cebp.training.checkpoint import BEST_POLICY_NAME, BestPolicy, stored_episodes, CHECKPOINT_NAME, POLICY_NAME
 from torchrl_cebp.training.evaluation import evaluate_success_rate
 from torchrl_cebp.training.metrics import RUN_SOURCES
-from torchrl_cebp.training.trainer import TEST_STREAM, RelabelledTransitions
+from torchrl_cebp.training.trainer import TEST_STREAM, Learner, RelabelledTransitions
 
 REPO = Path(__file__).resolve().parents[2]
 TINY = [
@@ -63,6 +63,18 @@ def test_tiny_run_writes_csv_and_checkpoint(tmp_path, sampler):
     test_env = make_env(cfg, cfg.rollouts_per_cycle)
     test_env.set_seed(derive_seed(cfg.seed, 1, TEST_STREAM))
     assert float(log[-1]["test_success"]) == evaluate_success_rate(test_env, load_policy(tmp_path), cfg.test_episodes)
+
+
+def test_mep_refits_once_an_epoch_before_the_last_cycles_episodes_are_stored(tmp_path, monkeypatch):
+    # As the paper's code: fit_density_model() at cycle n_cycles - 1, before that cycle's store_episode().
+    calls = []
+    for name in ("store", "refit_sampler"):
+        method = getattr(Learner, name)
+        monkeypatch.setattr(Learner, name, lambda self, *args, _m=method, _n=name: (calls.append(_n), _m(self, *args))[1])
+    train(config("sampler=mep", "env=push", "epochs=2", "cycles_per_epoch=3"), tmp_path)
+    assert calls == ["store", "store", "refit_sampler", "store"] * 2
+    sampler = load_checkpoint(tmp_path)["replay"]["_sampler"]
+    assert sampler["n_refits"] == 2
 
 
 @pytest.mark.parametrize("workers", [1, 2])

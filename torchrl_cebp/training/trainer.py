@@ -139,7 +139,7 @@ class Learner:
             self.totals["is_weight_min"] += batch["priority_weight"].min()
 
     def refit_sampler(self) -> None:
-        """The sampler's once-an-epoch re-ranking of the stored episodes (MEP's density model)."""
+        """The sampler's once-an-epoch refit on the stored episodes (MEP's density model)."""
         refit = getattr(self.sampler, "refit", None)
         if refit is not None:
             refit(self.replay.storage)
@@ -163,7 +163,11 @@ def run_epoch(cfg: DictConfig, epoch: int, learner: Learner, batches: EpisodeBat
             # is collected here, with the policy of the end of the last cycle, as baselines does.
             seed = derive_seed(cfg.seed, epoch, COLLECTION_STREAM) if cycle == 0 else None
             batches.request(seed, background=overlap)
-        learner.store(batches.result())
+        episodes = batches.result()
+        if cycle == cfg.cycles_per_epoch - 1:
+            # The paper's code refits MEP's density model once an epoch, on the buffer before the last cycle's episodes.
+            learner.refit_sampler()
+        learner.store(episodes)
         if overlap and cycle + 1 < cfg.cycles_per_epoch:
             # The next cycle's episodes, collected during this cycle's updates: one cycle stale.
             batches.request(background=True)
@@ -180,7 +184,6 @@ def run_epoch(cfg: DictConfig, epoch: int, learner: Learner, batches: EpisodeBat
         learner.agent.target_updater.step()
         update_s += time.perf_counter() - tick
         load += os.getloadavg()[0] / cfg.cycles_per_epoch
-    learner.refit_sampler()
     return {"collect_s": collect_s, "update_s": update_s, "load_avg": load}
 
 

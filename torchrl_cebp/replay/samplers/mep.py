@@ -13,6 +13,8 @@ from torchrl.data.replay_buffers.storages import Storage
 from torchrl_cebp.replay.episodes import valid_steps
 from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, episode_positions
 
+# The paper's code adds it to the dense rank (from 0), so that the most common trajectories stay drawable.
+RANK_OFFSET = 0.001
 # The fitted attributes of a BayesianGaussianMixture (weight_concentration_prior_type="dirichlet_distribution")
 # that score_samples reads: sklearn's public fitted state, saved by name.
 MIXTURE_STATE = ("weight_concentration_", "mean_precision_", "means_", "degrees_of_freedom_",
@@ -24,13 +26,15 @@ class MEPSampler(EpisodePrioritySampler):
 
     A :class:`sklearn.mixture.BayesianGaussianMixture` (Dirichlet-distribution
     prior) is fitted on the flattened achieved-goal trajectories of the buffer
-    by :meth:`refit`, which the trainer calls on a schedule (once per epoch in
-    the paper). Each episode's score is ``-log density``; ``p(e)`` is
-    proportional to ``dense_rank(score) ^ (1 / (temperature + 0.01))``.
-    Episodes written between refits are scored by the current mixture and
-    ranked against the scores of the last refit (O(log N) each), so a write
-    never rescans the buffer. Before the first refit every episode has rank 1.
-    No importance-sampling weights.
+    by :meth:`refit`, which the trainer calls on a schedule (once per epoch,
+    before the epoch's last cycle is stored, as the paper's code does). Each
+    episode's score is its ``-log density`` less the lowest score of the last
+    fit, floored at 0. After every write, every stored episode is ranked
+    (dense ranks from 0, over the whole buffer) and ``p(e)`` is proportional to
+    ``(rank + 0.001) ^ (1 / (temperature + 0.01))``: the ``entropy`` mode of
+    HER_force (ORIGINAL_CODE.md §4). Episodes written between refits are scored
+    by the current mixture. Before the first refit every episode has rank 0, so
+    draws are uniform. No importance-sampling weights.
 
     Args:
         n_components: mixture components (3 in MEP).
@@ -84,7 +88,8 @@ class MEPSampler(EpisodePrioritySampler):
         self.position_key = position_key
         self.next_position_key = next_position_key
         self._mixture: BayesianGaussianMixture | None = None
-        self._reference_scores = torch.zeros(0, dtype=torch.float64)
+        self._lowest_fit_score = 0.0
+        self._scores = torch.zeros(0, dtype=torch.float64)  # per episode row; 0 until the first refit
         self._n_refits = 0
 
     def _new_mixture(self, covariance_prior: np.ndarray | None = None) -> BayesianGaussianMixture:
@@ -104,21 +109,32 @@ class MEPSampler(EpisodePrioritySampler):
         positions = positions.gather(1, state.unsqueeze(-1).expand_as(positions))
         return positions.flatten(1).numpy()
 
-    def _scores(self, trajectories: np.ndarray) -> torch.Tensor:
+    def _raw_scores(self, trajectories: np.ndarray) -> torch.Tensor:
         return torch.from_numpy(-self._mixture.score_samples(trajectories))
 
-    def _priority_from_rank(self, rank: torch.Tensor) -> torch.Tensor:
-        return rank.double().pow(1.0 / (self.temperature + 0.01))
-
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
-        if self._mixture is None:
-            return torch.ones(episodes.shape[0], dtype=torch.float64)
-        scores = self._scores(self._trajectories(episodes, valid))
-        rank = torch.searchsorted(self._reference_scores, scores) + 1
-        return self._priority_from_rank(rank)
+        # A placeholder: an episode's priority is its rank among all stored episodes, set once the written
+        # episodes are scored (write_priorities).
+        return torch.ones(episodes.shape[0], dtype=torch.float64)
+
+    def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase) -> None:
+        super().write_priorities(rows, episodes)
+        if self._scores.numel() != self._priorities.numel():
+            self._scores = torch.zeros_like(self._priorities)
+        if self._mixture is not None:
+            valid = valid_steps(self._lengths[rows], episodes.shape[1])
+            raw = self._raw_scores(self._trajectories(episodes, valid))
+            self._scores[rows] = (raw - self._lowest_fit_score).clamp(min=0.0)
+        self._rank_stored()
+
+    def _rank_stored(self) -> None:
+        """Dense ranks from 0 of every stored episode's score, as priorities."""
+        rows = torch.arange(self.n_episodes)
+        rank = torch.unique(self._scores[rows], return_inverse=True)[1]
+        self.set_priorities(rows, (rank.double() + RANK_OFFSET).pow(1.0 / (self.temperature + 0.01)))
 
     def refit(self, storage: Storage) -> None:
-        """Fits the mixture on the stored trajectories and re-ranks every stored episode."""
+        """Fits the mixture on the stored trajectories, rescores and re-ranks every stored episode."""
         if self.n_episodes < self.n_components:
             return
         rows = torch.arange(self.n_episodes)
@@ -128,22 +144,28 @@ class MEPSampler(EpisodePrioritySampler):
         prior = np.cov(fit_data.T) + self.reg_covar * np.eye(fit_data.shape[1])
         self._mixture = self._new_mixture(prior).fit(fit_data)
         self._n_refits += 1
-        unique_scores, rank = torch.unique(self._scores(trajectories), return_inverse=True)
-        self._reference_scores = unique_scores
-        self.set_priorities(rows, self._priority_from_rank(rank + 1))
+        raw = self._raw_scores(trajectories)
+        self._lowest_fit_score = float(raw.min())
+        self._scores[rows] = raw - self._lowest_fit_score
+        self._rank_stored()
 
     def state_dict(self) -> dict[str, Any]:
         state = super().state_dict()
-        state["reference_scores"] = self._reference_scores.clone()
-        state["n_refits"] = self._n_refits
+        state.update(scores=self._scores.clone(), lowest_fit_score=self._lowest_fit_score, n_refits=self._n_refits)
         if self._mixture is not None:
             for name in MIXTURE_STATE:
                 state[f"mixture_{name}"] = torch.tensor(np.asarray(getattr(self._mixture, name)))  # a copy
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        if "scores" not in state_dict:
+            raise ValueError(
+                "this MEP state is from before MEPSampler ranked the whole buffer on every write (2026-12-06); "
+                "it holds no per-episode scores to rank: start the run again"
+            )
         super().load_state_dict(state_dict)
-        self._reference_scores = state_dict["reference_scores"].clone()
+        self._scores = state_dict["scores"].clone()
+        self._lowest_fit_score = float(state_dict["lowest_fit_score"])
         self._n_refits = int(state_dict["n_refits"])
         self._mixture = None
         if f"mixture_{MIXTURE_STATE[0]}" in state_dict:
@@ -151,6 +173,10 @@ class MEPSampler(EpisodePrioritySampler):
             for name in MIXTURE_STATE:
                 setattr(self._mixture, name, state_dict[f"mixture_{name}"].numpy().copy())
             self._mixture.n_features_in_ = self._mixture.means_.shape[1]
+
+    def _empty(self) -> None:
+        super()._empty()
+        self._scores.zero_()
 
     def __repr__(self) -> str:
         return (
