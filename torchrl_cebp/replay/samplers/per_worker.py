@@ -2,10 +2,11 @@
 
 In baselines' HER (ORIGINAL_CODE.md §3) each of the ``W`` MPI workers owns a replay buffer of the
 episodes its own envs collected, computes priorities over it, draws its own batch and normalises its
-importance-sampling weights within that batch; the workers' gradients are then summed. For uniform
-HER one merged buffer drawing ``W x batch`` is the same distribution; for a prioritised sampler it is
-not (one merged batch puts its weight scale on its single least likely sample, and turns the weights
-on once ``W x 256`` episodes are stored in all rather than 256 per worker).
+importance-sampling weights within it (by the batch's largest weight for CEBP, by the smallest priority in its
+own trees for PER); the workers' gradients are then summed. For uniform HER one merged buffer drawing
+``W x batch`` is the same distribution; for a prioritised sampler it is not (one merged batch puts its
+weight scale on its single least likely sample, and turns the weights on once ``W x 256`` episodes are
+stored in all rather than 256 per worker).
 
 Why not TorchRL's ``ReplayBufferEnsemble`` / ``SamplerEnsemble``: the ensemble keeps one buffer per
 member, and in TorchRL 0.14.1 its routed ``extend`` flattens the written data to single transitions
@@ -151,7 +152,7 @@ class PerWorkerSampler(Sampler):
     Each worker's sampler sees only that worker's rows (a :class:`WorkerRows` view), so its
     priorities, density model (MEP), segment trees (PER), episode count and importance-sampling
     normalisation are its own. A draw of ``batch_size`` concatenates the ``W`` workers' draws of
-    ``batch_size // W``, worker 0 first, with ``"priority_weight"`` normalised within each part.
+    ``batch_size // W``, worker 0 first, with ``"priority_weight"`` normalised by each worker's own sampler.
     Feed TD errors back to PER shards with :func:`~torchrl_cebp.replay.update_td_priorities`
     (``rb.update_priority``): TorchRL's ``rb.update_tensordict_priority`` skips any sampler that is
     not a :class:`~torchrl.data.PrioritizedSampler`, this one included.
