@@ -221,6 +221,48 @@ def test_mep_reranks_the_whole_buffer_on_every_write():
     assert sampler._priorities[N_EPISODES] > sampler._priorities[N_EPISODES + 1] > sampler._priorities[:N_EPISODES].max()
 
 
+def test_mep_ties_episodes_denser_than_any_fitted_one_at_rank_0():
+    sampler = MEPSampler(seed=0)
+    rb, _ = buffer(sampler)
+    sampler.refit(rb.storage)
+    densest = hand_made(1, seed=5)
+    centre = torch.from_numpy(sampler._mixture.means_[sampler._mixture.weights_.argmax()]).float().view(T + 1, 3)
+    densest["achieved_goal"][0, 0], densest["next", "achieved_goal"][0] = centre[0], centre[1:]
+    raw = -sampler._mixture.score_samples(centre.double().view(1, -1).numpy())
+    lowest_fitted = sampler._priorities[:N_EPISODES].argmin()
+    assert raw < sampler.state_dict()["lowest_fit_score"]  # below every fitted episode: the floor applies
+    rb.extend(densest)
+    assert sampler._priorities[N_EPISODES] == sampler._priorities[lowest_fitted] == 0.001 ** (1 / 1.01)
+
+
+def test_an_emptied_mep_buffer_draws_uniformly_until_its_next_refit():
+    sampler = MEPSampler(seed=0)
+    rb, _ = buffer(sampler)
+    sampler.refit(rb.storage)
+    rb.empty()
+    rb.extend(hand_made(N_EPISODES, seed=2))
+    assert_frequencies(counts(rb), np.ones(N_EPISODES))
+
+
+def _report_scores_held(rb, reports):
+    reports.put(rb.sampler.state_dict()["scores"].numel())
+
+
+def test_a_spawned_copy_of_mep_leaves_the_scores_to_the_process_that_draws():
+    # As with the priorities: a copy holding the scores would share their memory, and its rb.empty() would wipe them.
+    rb = make_replay_buffer(MEPSampler(seed=0), HindsightRelabel(sparse_reward), capacity=50 * T, batch_size=64,
+                            shared=True)
+    rb.extend(hand_made(N_EPISODES))
+    rb.sampler.refit(rb.storage)
+    context = torch.multiprocessing.get_context("spawn")
+    reports = context.Queue()
+    child = context.Process(target=_report_scores_held, args=(rb, reports))
+    child.start()
+    assert reports.get(timeout=120) == 0
+    child.join(timeout=60)
+    assert rb.sampler.state_dict()["scores"][:N_EPISODES].max() > 0
+
+
 def test_mep_state_round_trip_keeps_the_ranks_of_later_writes():
     sampler = MEPSampler(seed=0)
     rb, _ = buffer(sampler)

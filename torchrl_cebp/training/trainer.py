@@ -166,7 +166,10 @@ def run_epoch(cfg: DictConfig, epoch: int, learner: Learner, batches: EpisodeBat
         episodes = batches.result()
         if cycle == cfg.cycles_per_epoch - 1:
             # The paper's code refits MEP's density model once an epoch, on the buffer before the last cycle's episodes.
+            # The fit counts in the epoch's time, not in the collection's.
+            collect_s += time.perf_counter() - tick
             learner.refit_sampler()
+            tick = time.perf_counter()
         learner.store(episodes)
         if overlap and cycle + 1 < cfg.cycles_per_epoch:
             # The next cycle's episodes, collected during this cycle's updates: one cycle stale.

@@ -1,9 +1,10 @@
 """Episode-level prioritised sampling over a ``[episode, t]`` TorchRL storage.
 
 Every sampler here draws an *episode row* with probability proportional to a
-priority computed once, when the episode is written, and then a step inside
-it. Priorities live in a sum segment tree (TorchRL's C++ one), so a draw costs
-O(batch x log episodes) and never rescans the buffer. Episodes may end before
+priority computed when the episode is written (MEP's ranks also change with
+every write and refit), and then a step inside it. Priorities live in a sum
+segment tree (TorchRL's C++ one), so a draw costs O(batch x log episodes) and
+never rescans the buffer. Episodes may end before
 their row does (an ``("next", "done")`` flag before ``T``): the steps after the
 end are padding, which priorities ignore and draws never return.
 """
