@@ -157,20 +157,16 @@ def run_epoch(cfg: DictConfig, epoch: int, learner: Learner, batches: EpisodeBat
     overlap = cfg.overlap_collection
     collect_s = update_s = load = 0.0
     for cycle in range(cfg.cycles_per_epoch):
+        if cycle == cfg.cycles_per_epoch - 1:
+            # The paper's code refits MEP's density model once an epoch, on the buffer before the last cycle's episodes.
+            learner.refit_sampler()
         tick = time.perf_counter()
         if cycle == 0 or not overlap:
             # The epoch's first batch restarts the collection streams; without overlap each batch
             # is collected here, with the policy of the end of the last cycle, as baselines does.
             seed = derive_seed(cfg.seed, epoch, COLLECTION_STREAM) if cycle == 0 else None
             batches.request(seed, background=overlap)
-        episodes = batches.result()
-        if cycle == cfg.cycles_per_epoch - 1:
-            # The paper's code refits MEP's density model once an epoch, on the buffer before the last cycle's episodes.
-            # The fit counts in the epoch's time, not in the collection's.
-            collect_s += time.perf_counter() - tick
-            learner.refit_sampler()
-            tick = time.perf_counter()
-        learner.store(episodes)
+        learner.store(batches.result())
         if overlap and cycle + 1 < cfg.cycles_per_epoch:
             # The next cycle's episodes, collected during this cycle's updates: one cycle stale.
             batches.request(background=True)

@@ -357,13 +357,17 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
             self._tree[torch.arange(self._priorities.numel())] = self._priorities
         self._writes_watch = None  # the state matches the storage's rows as they are now
 
+    def _owner_only_state(self) -> dict[str, Any]:
+        """What a spawned copy holds in place of the per-row state only the drawing process keeps."""
+        return dict(_priorities=torch.zeros(0, dtype=torch.float64), _tree=None,
+                    _lengths=torch.zeros(0, dtype=torch.long), _cumulative_step_weights=None, _n_stored=0,
+                    _writes_watch=None)
+
     def __getstate__(self) -> dict[str, Any]:
         state = super().__getstate__()
         if get_spawning_popen() is not None:  # sent to a new process, which writes and leaves the scoring to this one
             # Without this process's priorities: torch would share them, and an rb.empty() there would clear them.
-            state.update(_spawned_copy=True, _priorities=torch.zeros(0, dtype=torch.float64), _tree=None,
-                         _lengths=torch.zeros(0, dtype=torch.long), _cumulative_step_weights=None, _n_stored=0,
-                         _writes_watch=None)
+            state.update(_spawned_copy=True, **self._owner_only_state())
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:

@@ -174,11 +174,8 @@ class MEPSampler(EpisodePrioritySampler):
                 setattr(self._mixture, name, state_dict[f"mixture_{name}"].numpy().copy())
             self._mixture.n_features_in_ = self._mixture.means_.shape[1]
 
-    def __getstate__(self) -> dict[str, Any]:
-        state = super().__getstate__()
-        if state.get("_spawned_copy"):  # as the priorities: torch would share the scores, which the owner keeps
-            state["_scores"] = torch.zeros(0, dtype=torch.float64)
-        return state
+    def _owner_only_state(self) -> dict[str, Any]:
+        return {**super()._owner_only_state(), "_scores": torch.zeros(0, dtype=torch.float64)}
 
     def _empty(self) -> None:
         # An emptied buffer starts over: uniform draws until the next refit.
