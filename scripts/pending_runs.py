@@ -5,10 +5,17 @@ machine ``runs/`` is gone, so ``resume=true`` would repeat such a run from epoch
 float noise on another); this filter skips it instead, and names each skipped run on stderr. Lines pass through
 unchanged, in order.
 
+With ``--plan`` it runs nothing and passes nothing: it prints each queued run's epochs done (committed, or finished
+in ``runs/`` and resumable there) and left, and how long the rest would take, from the median epoch time of the
+nearest committed runs: the same configuration's other seeds, else the same sampler's on the task, else the task's.
+
     printf '%s\n' "+comparison=push_standard sampler=her seed=0" | python scripts/pending_runs.py
+    printf '%s\n' "+comparison=push_standard sampler=her seed=0" | python scripts/pending_runs.py --plan --jobs 2
 """
 
 import argparse
+import csv
+import statistics
 import sys
 from pathlib import Path
 
@@ -19,6 +26,7 @@ import torchrl_cebp.training.config  # noqa: F401  (registers the resolvers that
 
 REPO = Path(__file__).resolve().parents[1]
 COMMITTED = REPO / "docs" / "results" / "comparison"
+RUNS = REPO / "runs"
 
 
 def run_folder_and_epochs(overrides: list[str]) -> tuple[Path, int]:
@@ -30,24 +38,66 @@ def run_folder_and_epochs(overrides: list[str]) -> tuple[Path, int]:
 
 def committed_epochs(folder: Path, root: Path = COMMITTED) -> int:
     """How many epochs the committed ``progress.csv`` of a run folder holds (0 when there is none)."""
-    csv = root / folder / "progress.csv"
-    return max(sum(1 for _ in csv.open()) - 1, 0) if csv.is_file() else 0
+    csv_path = root / folder / "progress.csv"
+    return max(sum(1 for _ in csv_path.open()) - 1, 0) if csv_path.is_file() else 0
+
+
+def median_epoch_seconds(folder: Path, root: Path = COMMITTED) -> float | None:
+    """The median ``epoch_s`` of a run's nearest committed relatives: its configuration's seeds, else its sampler's
+    runs on the task, else the task's runs (``task/sampler/configuration/seed`` is a run folder's layout)."""
+    for relatives in folder.parents[:-1]:
+        seconds = [float(row["epoch_s"]) for path in sorted((root / relatives).glob("**/progress.csv"))
+                   for row in csv.DictReader(path.open()) if row.get("epoch_s")]
+        if seconds:
+            return statistics.median(seconds)
+    return None
+
+
+def print_plan(queue: list[tuple[Path, int]], committed: Path, runs: Path, jobs: int) -> None:
+    """Each run's epochs done and left, and the hours the rest takes at ``jobs`` runs at a time."""
+    width = max((len(str(folder)) for folder, _ in queue), default=0)
+    epochs_left = seconds_left = 0.0
+    unpriced = []
+    for folder, epochs in queue:
+        done = min(max(committed_epochs(folder, committed), committed_epochs(folder, runs)), epochs)
+        left = epochs - done
+        seconds = median_epoch_seconds(folder, committed)
+        if left and seconds is None:
+            unpriced.append(str(folder))
+        epochs_left += left
+        seconds_left += left * (seconds or 0.0)
+        print(f"{str(folder):<{width}}  {done:>3} of {epochs:>3} epochs done  {left:>3} left")
+    print(f"{int(epochs_left)} run-epochs left; about {seconds_left / 3600 / jobs:.1f} hours at {jobs} run(s) at a time "
+          f"(each at the median epoch time of its nearest committed relatives)")
+    if unpriced:
+        print(f"no committed relative to price them, so not in the hours: {', '.join(unpriced)}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--committed", type=Path, default=COMMITTED, help="the committed run folders (default: %(default)s)")
+    parser.add_argument("--plan", action="store_true", help="print what is left of the queue and its hours; run nothing")
+    parser.add_argument("--runs", type=Path, default=RUNS, help="the live run folders, for --plan (default: %(default)s)")
+    parser.add_argument("--jobs", type=int, default=1, help="runs at a time, for --plan's hours (default: %(default)s)")
     args = parser.parse_args()
+    if args.jobs < 1:
+        parser.error(f"--jobs must be at least 1, not {args.jobs}")
+    plan = []
     with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
         for line in sys.stdin:
             if not line.strip():
                 continue
             folder, epochs = run_folder_and_epochs(line.split())
+            if args.plan:
+                plan.append((folder, epochs))
+                continue
             done = committed_epochs(folder, args.committed)
             if done >= epochs:
                 print(f"[pending] skipped, {done} of {epochs} epochs committed: {folder}", file=sys.stderr)
             else:
                 print(line.rstrip("\n"), flush=True)
+    if args.plan:
+        print_plan(plan, args.committed, args.runs, args.jobs)
 
 
 if __name__ == "__main__":

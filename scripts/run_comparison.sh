@@ -3,11 +3,14 @@
 # priority order, JOBS runs at a time (default 1; JOBS=2 uses both cores). Each run is resumable: rerunning this
 # script continues each run after its last finished epoch, and finished runs return at once; a run whose CSV in
 # docs/results/comparison/ already holds all its epochs is skipped (scripts/pending_runs.py; SKIP_COMMITTED=0 runs it).
-# Commit epochs as they finish with bash scripts/sync_results.sh --every 600.
-# Usage: [JOBS=2] bash scripts/run_comparison.sh [Hydra overrides]
+# Commit epochs as they finish with bash scripts/sync_results.sh --every 600. --plan runs nothing: it prints each
+# queued run's epochs done and left, and the hours the rest takes at JOBS runs at a time.
+# Usage: [JOBS=2] bash scripts/run_comparison.sh [--plan] [Hydra overrides]
 set -uo pipefail
 cd "$(dirname "$0")/.."
-if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,7p' "$0" | cut -c3-; exit 0; fi
+if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,8p' "$0" | cut -c3-; exit 0; fi
+plan=0
+if [ "${1:-}" = "--plan" ]; then plan=1; shift; fi
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 MUJOCO_GL=osmesa
 export python=${PYTHON:-.venv/bin/python}
 run() { echo "[comparison] $(date -u +%FT%TZ) $*"; "$python" train.py "$@" || echo "[comparison] run failed: $*" >&2; }
@@ -19,7 +22,7 @@ seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${
 # Issue 27's reruns are complete in docs/results/comparison/ (docs/results.md, twelfth sitting); their commands:
 #   train.py -m +comparison=push_standard seed=0,1,2 sampler=cebp_initial     (robot A, per worker)
 #   train.py -m +comparison=push_released seed=0,1,2 sampler=cebp_released    (robot B, per worker)
-{
+queue() {
   # 28.1 A PickAndPlace HER on the merged buffer, as robot A's Push HER rows: uniform HER draws the same
   # distribution either way (tests/replay/test_per_worker.py).
   seeds +comparison=pick_place_standard sampler=her replay.per_worker=false
@@ -41,5 +44,8 @@ seeds() { local seed; for seed in ${SEED_ORDER:-0 1 2}; do echo "$* seed=$seed${
   # nothing, leads HER by 2.4x where cebp_initial is level with it: is it the priorities or the weights?
   seeds +comparison=push_standard sampler=cebp_initial sampler.beta=0 \
     'hydra.run.dir=runs/push-standard/cebp_initial/paper-per_worker-beta0/seed${seed}'
-} | if [ "${SKIP_COMMITTED:-1}" = 1 ]; then "${FILTER_PYTHON:-.venv/bin/python}" scripts/pending_runs.py; else cat; fi \
+}
+filter=${FILTER_PYTHON:-.venv/bin/python}
+if [ "$plan" = 1 ]; then queue | "$filter" scripts/pending_runs.py --plan --jobs "${JOBS:-1}"; exit; fi
+queue | if [ "${SKIP_COMMITTED:-1}" = 1 ]; then "$filter" scripts/pending_runs.py; else cat; fi \
   | xargs -r -P "${JOBS:-1}" -L 1 bash -c 'run "$@"' run   # -r: an empty queue runs nothing, not a default train.py

@@ -66,6 +66,28 @@ def test_pending_runs_skips_a_run_only_once_its_committed_csv_holds_all_its_epoc
     assert "skipped, 20 of 20 epochs committed: pick_place-standard/her/paper/seed0" in out.stderr
 
 
+def test_pending_runs_plan_counts_epochs_done_here_or_committed_and_prices_them_by_their_nearest_relatives(tmp_path):
+    stage = "+comparison=pick_place_standard sampler=her replay.per_worker=false"  # 20 epochs, in her/paper/
+    committed, runs = tmp_path / "committed", tmp_path / "runs"
+    for root, folder, epochs, seconds in (
+        (committed, "her/paper/seed0", 20, 720),  # the configuration's own seed prices the others
+        (committed, "cper/paper-per_worker/seed0", 20, 10),  # a farther relative, not used
+        (runs, "her/paper/seed1", 5, 1),  # finished here, resumable, not yet committed
+    ):
+        csv = root / "pick_place-standard" / folder / "progress.csv"
+        csv.parent.mkdir(parents=True)
+        csv.write_text("epoch,epoch_s\n" + "".join(f"{epoch},{seconds}\n" for epoch in range(epochs)))
+    out = subprocess.run(
+        [sys.executable, "scripts/pending_runs.py", "--plan", "--jobs", "2", "--committed", str(committed),
+         "--runs", str(runs)], cwd=REPO, input="".join(f"{stage} seed={seed}\n" for seed in range(3)),
+        capture_output=True, text=True, check=True,
+    )
+    lines = [" ".join(line.split()) for line in out.stdout.splitlines()]
+    assert lines[:3] == [f"pick_place-standard/her/paper/seed{seed} {done} of 20 epochs done {20 - done} left"
+                         for seed, done in ((0, 20), (1, 5), (2, 0))]
+    assert lines[3].startswith("35 run-epochs left; about 3.5 hours at 2 run(s) at a time")  # 35 x 720 s / 2 runs
+
+
 def test_the_sim2real_training_script_resumes_the_shipped_policys_run_with_its_shared_replay():
     out = subprocess.run(["bash", "scripts/run_sim2real_training.sh"], cwd=REPO, capture_output=True, text=True,
                          check=True, env={**os.environ, "PYTHON": "echo"})
