@@ -1,11 +1,13 @@
-"""The shell scripts' run queues, read without training: PYTHON=echo prints each run's command line."""
+"""The scripts: the run queues read without training (PYTHON=echo prints each run's command), and the analyses on tiny real runs."""
 
+import csv
 import os
 import subprocess
 import sys
 from collections import Counter
 from pathlib import Path
 
+import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.hydra_config import HydraConfig
 
@@ -86,6 +88,35 @@ def test_pending_runs_plan_counts_epochs_done_here_or_committed_and_prices_them_
     assert lines[:3] == [f"pick_place-standard/her/paper/seed{seed} {done} of 20 epochs done {20 - done} left"
                          for seed, done in ((0, 20), (1, 5), (2, 0))]
     assert lines[3].startswith("35 run-epochs left; about 3.5 hours at 2 run(s) at a time")  # 35 x 720 s / 2 runs
+
+
+def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tmp_path):
+    from torchrl_cebp.training import train
+
+    tiny = ["epochs=2", "cycles_per_epoch=3", "updates_per_cycle=2", "batch_size=16", "test_episodes=1",
+            "replay.capacity=5000", "agent.hidden=[32,32]", "workers=2", "sampler=mep", "env=push"]
+    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
+        train(compose("config", overrides=tiny), tmp_path)
+    out = subprocess.run(
+        [sys.executable, "scripts/compare_draws.py", str(tmp_path), "--samplers", "mep", "her", "--csv",
+         str(tmp_path / "draws.csv")], cwd=REPO, capture_output=True, text=True, check=True,
+    )
+    with (tmp_path / "draws.csv").open() as f:
+        draws = {(row["sampler"], int(row["epoch"])): row for row in csv.DictReader(f)}
+    with (tmp_path / "progress.csv").open() as f:
+        run = list(csv.DictReader(f))
+    for epoch, row in enumerate(run):
+        # MEP's ranks hang on each refit's place in the epoch and on its fit's random stream: both as the run had them
+        assert float(draws["mep", epoch]["ess"]) == pytest.approx(float(row["priority_ess_fraction"]), rel=1e-6)
+        assert float(draws["her", epoch]["ess"]) == pytest.approx(1.0)
+        assert int(draws["her", epoch]["episodes"]) == (epoch + 1) * 3 * 2 * 2  # cycles x episodes x workers
+    assert "mep" in out.stdout and "moved" in out.stdout
+
+
+def test_compare_draws_names_the_samplers_it_can_compare():
+    out = subprocess.run([sys.executable, "scripts/compare_draws.py", "runs/none", "--samplers", "per"], cwd=REPO,
+                         capture_output=True, text=True)
+    assert out.returncode == 2 and "'per' draws no episode priorities here; choose from her, cebp" in out.stderr
 
 
 def test_the_sim2real_training_script_resumes_the_shipped_policys_run_with_its_shared_replay():

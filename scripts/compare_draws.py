@@ -1,0 +1,162 @@
+"""What each prioritised sampler would replay from one run's stored episodes, epoch by epoch.
+
+Every sampler named is fed the run's episodes in the order the run wrote them, a cycle's episodes per write, with
+the run's replay layout (per-worker replay gives each emulated worker its own episodes) and MEP's refit where the
+trainer makes it, before each epoch's last cycle is stored. After each epoch's episodes it reads the draw's
+probabilities and prints, per sampler:
+
+- ``ess``: the effective fraction of stored episodes the draw uses, ``1 / (N sum p^2)`` (the CSVs'
+  ``priority_ess_fraction``);
+- ``moved``: the share of draws that land on an episode whose object moved more than ``--moved-cm`` (its share
+  of the stored episodes is HER's, which draws uniformly);
+- ``touched``: the share on an episode where a finger pad felt something (on robot A nearly all: its pads feel the
+  table);
+- ``reached``: the share on an episode that ended at its own goal (its last reward is 0, not -1);
+- ``top1%``: the share on the 1% of stored episodes the sampler ranks highest.
+
+Which episodes a run stored depends on what it replayed, so a run of each sampler gives a different buffer; run it on
+several. PER is left out: its priorities are TD errors, which need the run's critic at each epoch.
+
+    python scripts/compare_draws.py runs/push-standard/ebp/paper-per_worker/seed0 --out draws.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from pathlib import Path
+
+import torch
+from omegaconf import DictConfig, OmegaConf
+from tensordict import TensorDictBase
+
+import torchrl_cebp.training.config  # noqa: F401  (registers the config resolvers the sampler configs use)
+from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+from torchrl_cebp.training.builders import episodes_per_cycle, make_sampler, replay_capacity
+from torchrl_cebp.training.checkpoint import load_checkpoint, stored_episodes
+
+REPO = Path(__file__).resolve().parents[1]
+SAMPLER_CONFIGS = REPO / "conf" / "sampler"
+EPISODE_PRIORITY_SAMPLERS = ("her", "cebp", "cebp_initial", "cebp_released", "cper", "ebp", "mep")
+METRICS = ("ess", "moved", "touched", "reached", "top1%")
+# Nothing here draws a batch, so HER never computes a reward.
+REWARD_FREE = HindsightRelabel(lambda achieved, goal: torch.zeros(*achieved.shape[:-1], 1))
+
+
+def sampler_config(run_cfg: DictConfig, name: str) -> DictConfig:
+    """The run's config with ``sampler`` swapped for ``conf/sampler/<name>.yaml``, resolved against the run's env."""
+    path = SAMPLER_CONFIGS / f"{name}.yaml"
+    if not path.is_file():
+        allowed = ", ".join(sorted(p.stem for p in SAMPLER_CONFIGS.glob("*.yaml")))
+        raise SystemExit(f"no sampler config {name!r}; the sampler configs are: {allowed}")
+    cfg = OmegaConf.merge(run_cfg, {"sampler": None})
+    cfg.sampler = OmegaConf.load(path)
+    OmegaConf.resolve(cfg)
+    return cfg
+
+
+def episode_features(episodes: TensorDictBase, moved_m: float) -> dict[str, torch.Tensor]:
+    """Per episode: did its object move more than ``moved_m`` from its start, did a pad touch anything, and did it end
+    at its goal."""
+    positions = episodes["next", "achieved_goal"]
+    start = episodes["achieved_goal"][:, :1]
+    moved = torch.linalg.vector_norm(positions - start, dim=-1).amax(dim=-1) > moved_m
+    touched = (episodes["next", "touch"] > 0).flatten(1).any(dim=-1)
+    reached = episodes["next", "reward"][:, -1].flatten() == 0
+    return {"moved": moved, "touched": touched, "reached": reached}
+
+
+def draw_shares(probabilities: torch.Tensor, features: dict[str, torch.Tensor]) -> dict[str, float]:
+    """The ``METRICS`` of one draw distribution over the stored episodes."""
+    p = probabilities.double() / probabilities.double().sum()
+    n = p.numel()
+    top = p.topk(max(n // 100, 1)).values.sum()
+    return {"ess": (1.0 / (n * p.square().sum())).item(), "moved": p[features["moved"]].sum().item(),
+            "touched": p[features["touched"]].sum().item(), "reached": p[features["reached"]].sum().item(),
+            "top1%": top.item()}
+
+
+def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str, moved_m: float) -> list[dict]:
+    """The ``METRICS`` of sampler ``name`` after each epoch, fed ``episodes`` as the run wrote them."""
+    cfg = sampler_config(run_cfg, name)
+    sampler = make_sampler(cfg)
+    replay = make_replay_buffer(sampler, REWARD_FREE, capacity=replay_capacity(cfg), batch_size=1)
+    per_cycle, cycles = episodes_per_cycle(cfg), cfg.cycles_per_epoch
+    per_epoch = per_cycle * cycles
+    rows = []
+    for epoch in range(episodes.shape[0] // per_epoch):
+        for cycle in range(cycles):
+            if cycle == cycles - 1 and hasattr(sampler, "refit"):
+                sampler.refit(replay.storage)
+            start = epoch * per_epoch + cycle * per_cycle
+            replay.extend(episodes[start:start + per_cycle])
+        stored = (epoch + 1) * per_epoch
+        features = episode_features(episodes[:stored], moved_m)
+        rows.append({"sampler": name, "epoch": epoch, "episodes": stored,
+                     **draw_shares(sampler.probabilities(torch.arange(stored)), features)})
+    return rows
+
+
+def episodes_as_written(run_dir: Path) -> tuple[DictConfig, TensorDictBase]:
+    """The run's config and every episode its checkpoint stores, in the order written, none overwritten."""
+    state = load_checkpoint(run_dir)
+    episodes, overwritten = stored_episodes(state)
+    if overwritten:
+        raise SystemExit(f"{run_dir}: its buffer wrapped ({overwritten} episodes overwritten); only the draws from "
+                         "a buffer that still holds every episode can be replayed")
+    return OmegaConf.create(state["config"]), episodes
+
+
+def plot(rows: list[dict], out: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(1, len(METRICS), figsize=(3.4 * len(METRICS) + 1.2, 3.2), constrained_layout=True)
+    for name in dict.fromkeys(row["sampler"] for row in rows):
+        mine = [row for row in rows if row["sampler"] == name]
+        for axis, metric in zip(axes, METRICS):
+            axis.plot([row["epoch"] for row in mine], [row[metric] for row in mine], marker=".", label=name)
+    for axis, metric in zip(axes, METRICS):
+        axis.set(title=metric, xlabel="epochs stored", ylim=(0, 1.02))
+    figure.legend(*axes[0].get_legend_handles_labels(), loc="outside right center")
+    figure.suptitle(title)
+    figure.savefig(out, dpi=110)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("run_dir", type=Path, help="a run folder with a checkpoint.pt")
+    parser.add_argument("--samplers", nargs="+", default=["her", "cebp_initial", "cebp", "ebp", "mep"],
+                        help="sampler configs of conf/sampler/ to compare (default: %(default)s)")
+    parser.add_argument("--moved-cm", type=float, default=1.0,
+                        help="an object moved when it left its start by more than this (default: %(default)s)")
+    parser.add_argument("--csv", type=Path, help="also write the rows to this CSV")
+    parser.add_argument("--out", type=Path, help="also draw the metrics over the epochs to this image")
+    args = parser.parse_args()
+    for name in args.samplers:
+        if name not in EPISODE_PRIORITY_SAMPLERS:
+            parser.error(f"--samplers: {name!r} draws no episode priorities here; choose from "
+                         f"{', '.join(EPISODE_PRIORITY_SAMPLERS)}")
+    run_cfg, episodes = episodes_as_written(args.run_dir)
+    rows = []
+    for name in args.samplers:
+        print(f"[draws] {name}", file=sys.stderr, flush=True)
+        rows += replay_as_written(run_cfg, episodes, name, args.moved_cm / 100)
+    print(f"episodes of {args.run_dir} ({run_cfg.sampler._target_.rsplit('.', 1)[-1]}'s run)")
+    print(f"{'sampler':<14}{'epoch':>6}{'episodes':>10}" + "".join(f"{m:>9}" for m in METRICS))
+    for row in rows:
+        print(f"{row['sampler']:<14}{row['epoch']:>6}{row['episodes']:>10}" + "".join(f"{row[m]:>9.3f}" for m in METRICS))
+    if args.csv:
+        with args.csv.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+    if args.out:
+        plot(rows, args.out, f"Draws from the episodes of {args.run_dir}")
+
+
+if __name__ == "__main__":
+    main()
