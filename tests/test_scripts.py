@@ -99,7 +99,8 @@ def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tm
         train(compose("config", overrides=tiny), tmp_path)
     out = subprocess.run(
         [sys.executable, "scripts/compare_draws.py", str(tmp_path), "--samplers", "mep", "her", "--csv",
-         str(tmp_path / "draws.csv")], cwd=REPO, capture_output=True, text=True, check=True,
+         str(tmp_path / "draws.csv"), "--out", str(tmp_path / "draws.png")], cwd=REPO, capture_output=True, text=True,
+        check=True,
     )
     with (tmp_path / "draws.csv").open() as f:
         draws = {(row["sampler"], int(row["epoch"])): row for row in csv.DictReader(f)}
@@ -110,7 +111,7 @@ def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tm
         assert float(draws["mep", epoch]["ess"]) == pytest.approx(float(row["priority_ess_fraction"]), rel=1e-6)
         assert float(draws["her", epoch]["ess"]) == pytest.approx(1.0)
         assert int(draws["her", epoch]["episodes"]) == (epoch + 1) * 3 * 2 * 2  # cycles x episodes x workers
-    assert "mep" in out.stdout and "moved" in out.stdout
+    assert "mep" in out.stdout and "moved" in out.stdout and (tmp_path / "draws.png").stat().st_size > 10_000
 
 
 def test_compare_draws_names_the_samplers_it_can_compare():
