@@ -23,61 +23,75 @@ several. PER is left out: its priorities are TD errors, which need the run's cri
 from __future__ import annotations
 
 import argparse
+import copy
 import csv
 import sys
 from pathlib import Path
 
 import torch
+from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import InterpolationKeyError
 from tensordict import TensorDictBase
 
-import torchrl_cebp.training.config  # noqa: F401  (registers the config resolvers the sampler configs use)
-from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+from torchrl_cebp.replay import HindsightRelabel, episode_lengths, make_replay_buffer
+from torchrl_cebp.replay.episodes import valid_steps
+from torchrl_cebp.samplers import EpisodePrioritySampler
 from torchrl_cebp.training.builders import episodes_per_cycle, make_sampler, replay_capacity
 from torchrl_cebp.training.checkpoint import load_checkpoint, stored_episodes
+from torchrl_cebp.training.trainer import sampling_spread
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLER_CONFIGS = REPO / "conf" / "sampler"
-EPISODE_PRIORITY_SAMPLERS = ("her", "cebp", "cebp_initial", "cebp_released", "cper", "ebp", "mep")
 METRICS = ("ess", "moved", "touched", "reached", "top1%")
 # Nothing here draws a batch, so HER never computes a reward.
 REWARD_FREE = HindsightRelabel(lambda achieved, goal: torch.zeros(*achieved.shape[:-1], 1))
 
 
+def episode_priority_samplers() -> list[str]:
+    """The sampler configs whose draw is by episode priority, which a stored buffer alone decides (not PER's)."""
+    return sorted(path.stem for path in SAMPLER_CONFIGS.glob("*.yaml")
+                  if issubclass(get_class(OmegaConf.load(path)._target_), EpisodePrioritySampler))
+
+
 def sampler_config(run_cfg: DictConfig, name: str) -> DictConfig:
-    """The run's config with ``sampler`` swapped for ``conf/sampler/<name>.yaml``, resolved against the run's env."""
-    path = SAMPLER_CONFIGS / f"{name}.yaml"
-    if not path.is_file():
-        allowed = ", ".join(sorted(p.stem for p in SAMPLER_CONFIGS.glob("*.yaml")))
-        raise SystemExit(f"no sampler config {name!r}; the sampler configs are: {allowed}")
-    cfg = OmegaConf.merge(run_cfg, {"sampler": None})
-    cfg.sampler = OmegaConf.load(path)
-    OmegaConf.resolve(cfg)
+    """The run's config with ``sampler`` swapped for ``conf/sampler/<name>.yaml``, resolved against the run's env.
+
+    The run's own sampler keeps the run's settings (a temperature sweep's, say), not the config file's defaults.
+    """
+    cfg = copy.deepcopy(run_cfg)
+    sampler = OmegaConf.load(SAMPLER_CONFIGS / f"{name}.yaml")
+    if sampler._target_ != run_cfg.sampler._target_:
+        cfg.sampler = sampler
+    try:
+        OmegaConf.resolve(cfg)
+    except InterpolationKeyError as error:
+        raise SystemExit(f"sampler {name!r} needs a setting this run's saved config lacks "
+                         f"(it predates it): {error.msg}") from None
     return cfg
 
 
 def episode_features(episodes: TensorDictBase, moved_m: float) -> dict[str, torch.Tensor]:
-    """Per episode: did its object move more than ``moved_m`` from its start, did a pad touch anything, and did it end
-    at its goal."""
-    positions = episodes["next", "achieved_goal"]
-    start = episodes["achieved_goal"][:, :1]
-    moved = torch.linalg.vector_norm(positions - start, dim=-1).amax(dim=-1) > moved_m
-    touched = (episodes["next", "touch"] > 0).flatten(1).any(dim=-1)
-    reached = episodes["next", "reward"][:, -1].flatten() == 0
-    return {"moved": moved, "touched": touched, "reached": reached}
+    """Per episode, over its valid steps: did its object leave its start by more than ``moved_m``, did a pad touch
+    anything, and did it end at its goal (its last reward 0, not -1)."""
+    lengths = episode_lengths(episodes)
+    valid = valid_steps(lengths, episodes.shape[1])
+    distance = torch.linalg.vector_norm(episodes["next", "achieved_goal"] - episodes["achieved_goal"][:, :1], dim=-1)
+    moved = (distance * valid).amax(dim=-1) > moved_m
+    touched = ((episodes["next", "touch"] > 0).any(dim=-1) & valid).any(dim=-1)
+    last_reward = episodes["next", "reward"].squeeze(-1).gather(1, (lengths - 1).unsqueeze(-1)).squeeze(-1)
+    return {"moved": moved, "touched": touched, "reached": last_reward == 0}
 
 
 def draw_shares(probabilities: torch.Tensor, features: dict[str, torch.Tensor]) -> dict[str, float]:
-    """The ``METRICS`` of one draw distribution over the stored episodes."""
+    """The shares of one draw over the stored episodes that land on each feature's episodes, and on the top 1%."""
     p = probabilities.double() / probabilities.double().sum()
-    n = p.numel()
-    top = p.topk(max(n // 100, 1)).values.sum()
-    return {"ess": (1.0 / (n * p.square().sum())).item(), "moved": p[features["moved"]].sum().item(),
-            "touched": p[features["touched"]].sum().item(), "reached": p[features["reached"]].sum().item(),
-            "top1%": top.item()}
+    top = p.topk(max(p.numel() // 100, 1)).values.sum()
+    return {**{name: p[episodes].sum().item() for name, episodes in features.items()}, "top1%": top.item()}
 
 
-def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str, moved_m: float) -> list[dict]:
+def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str,
+                      features: dict[str, torch.Tensor]) -> list[dict[str, str | int | float]]:
     """The ``METRICS`` of sampler ``name`` after each epoch, fed ``episodes`` as the run wrote them."""
     cfg = sampler_config(run_cfg, name)
     sampler = make_sampler(cfg)
@@ -87,28 +101,35 @@ def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str, 
     rows = []
     for epoch in range(episodes.shape[0] // per_epoch):
         for cycle in range(cycles):
-            if cycle == cycles - 1 and hasattr(sampler, "refit"):
+            if cycle == cycles - 1 and hasattr(sampler, "refit"):  # where the trainer refits MEP
                 sampler.refit(replay.storage)
             start = epoch * per_epoch + cycle * per_cycle
             replay.extend(episodes[start:start + per_cycle])
         stored = (epoch + 1) * per_epoch
-        features = episode_features(episodes[:stored], moved_m)
+        shares = draw_shares(sampler.probabilities(torch.arange(stored)),
+                             {key: value[:stored] for key, value in features.items()})
         rows.append({"sampler": name, "epoch": epoch, "episodes": stored,
-                     **draw_shares(sampler.probabilities(torch.arange(stored)), features)})
+                     "ess": sampling_spread(sampler)["priority_ess_fraction"], **shares})
     return rows
 
 
 def episodes_as_written(run_dir: Path) -> tuple[DictConfig, TensorDictBase]:
     """The run's config and every episode its checkpoint stores, in the order written, none overwritten."""
     state = load_checkpoint(run_dir)
+    cfg = OmegaConf.create(state["config"])
     episodes, overwritten = stored_episodes(state)
     if overwritten:
         raise SystemExit(f"{run_dir}: its buffer wrapped ({overwritten} episodes overwritten); only the draws from "
                          "a buffer that still holds every episode can be replayed")
-    return OmegaConf.create(state["config"]), episodes
+    written = (state["epoch"] + 1) * cfg.cycles_per_epoch * episodes_per_cycle(cfg)
+    if episodes.shape[0] != written:
+        raise SystemExit(f"{run_dir}: its buffer holds {episodes.shape[0]} episodes, where its {state['epoch'] + 1} "
+                         f"epochs of {cfg.cycles_per_epoch} cycles wrote {written}")
+    return cfg, episodes
 
 
-def plot(rows: list[dict], out: Path, title: str) -> None:
+def plot(rows: list[dict[str, str | int | float]], out: Path, title: str) -> None:
+    """One panel per metric, the epochs along x, one line per sampler."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -120,7 +141,7 @@ def plot(rows: list[dict], out: Path, title: str) -> None:
         for axis, metric in zip(axes, METRICS):
             axis.plot([row["epoch"] for row in mine], [row[metric] for row in mine], marker=".", label=name)
     for axis, metric in zip(axes, METRICS):
-        axis.set(title=metric, xlabel="epochs stored", ylim=(0, 1.02))
+        axis.set(title=metric, xlabel="epoch (its episodes stored)", ylim=(0, 1.02))
     figure.legend(*axes[0].get_legend_handles_labels(), loc="outside right center")
     figure.suptitle(title)
     figure.savefig(out, dpi=110)
@@ -136,15 +157,17 @@ def main() -> None:
     parser.add_argument("--csv", type=Path, help="also write the rows to this CSV")
     parser.add_argument("--out", type=Path, help="also draw the metrics over the epochs to this image")
     args = parser.parse_args()
+    allowed = episode_priority_samplers()
     for name in args.samplers:
-        if name not in EPISODE_PRIORITY_SAMPLERS:
-            parser.error(f"--samplers: {name!r} draws no episode priorities here; choose from "
-                         f"{', '.join(EPISODE_PRIORITY_SAMPLERS)}")
+        if name not in allowed:
+            parser.error(f"--samplers: {name!r} is not a sampler config that draws by episode priority; choose from "
+                         f"{', '.join(allowed)}")
     run_cfg, episodes = episodes_as_written(args.run_dir)
+    features = episode_features(episodes, args.moved_cm / 100)
     rows = []
     for name in args.samplers:
         print(f"[draws] {name}", file=sys.stderr, flush=True)
-        rows += replay_as_written(run_cfg, episodes, name, args.moved_cm / 100)
+        rows += replay_as_written(run_cfg, episodes, name, features)
     print(f"episodes of {args.run_dir} ({run_cfg.sampler._target_.rsplit('.', 1)[-1]}'s run)")
     print(f"{'sampler':<14}{'epoch':>6}{'episodes':>10}" + "".join(f"{m:>9}" for m in METRICS))
     for row in rows:

@@ -6,8 +6,8 @@ float noise on another); this filter skips it instead, and names each skipped ru
 unchanged, in order.
 
 With ``--plan`` it runs nothing and passes nothing: it prints each queued run's epochs done (committed, or finished
-in ``runs/`` and resumable there) and left, and how long the rest would take, from the median epoch time of the
-nearest committed runs: the same configuration's other seeds, else the same sampler's on the task, else the task's.
+in ``runs/`` and resumable there; a run killed between its CSV row and its checkpoint counts one epoch it will redo)
+and left, and how long the rest would take, from the median epoch time of its nearest committed relatives.
 
     printf '%s\n' "+comparison=push_standard sampler=her seed=0" | python scripts/pending_runs.py
     printf '%s\n' "+comparison=push_standard sampler=her seed=0" | python scripts/pending_runs.py --plan --jobs 2
@@ -38,16 +38,32 @@ def run_folder_and_epochs(overrides: list[str]) -> tuple[Path, int]:
 
 def committed_epochs(folder: Path, root: Path = COMMITTED) -> int:
     """How many epochs the committed ``progress.csv`` of a run folder holds (0 when there is none)."""
-    csv_path = root / folder / "progress.csv"
-    return max(sum(1 for _ in csv_path.open()) - 1, 0) if csv_path.is_file() else 0
+    progress = root / folder / "progress.csv"
+    if not progress.is_file():
+        return 0
+    with progress.open() as rows:
+        return max(sum(1 for _ in rows) - 1, 0)
+
+
+def relatives(folder: Path) -> list[str]:
+    """Glob patterns of a run's relatives, nearest first: its configuration's seeds, then the configurations whose
+    names share ever shorter ``-``-separated prefixes with its own (``paper-per_worker-beta0``: ``paper-per_worker*``,
+    then ``paper*``), then the sampler's, then the task's. A run folder is ``task/sampler/configuration/seed``."""
+    configuration = folder.parent
+    parts = configuration.name.split("-")
+    prefixes = ["-".join(parts[:n]) + "*" for n in range(len(parts) - 1, 0, -1)]
+    return [f"{configuration}/*/progress.csv",
+            *(f"{configuration.parent}/{prefix}/*/progress.csv" for prefix in prefixes),
+            f"{configuration.parent}/*/*/progress.csv", f"{folder.parts[0]}/**/progress.csv"]
 
 
 def median_epoch_seconds(folder: Path, root: Path = COMMITTED) -> float | None:
-    """The median ``epoch_s`` of a run's nearest committed relatives: its configuration's seeds, else its sampler's
-    runs on the task, else the task's runs (``task/sampler/configuration/seed`` is a run folder's layout)."""
-    for relatives in folder.parents[:-1]:
-        seconds = [float(row["epoch_s"]) for path in sorted((root / relatives).glob("**/progress.csv"))
-                   for row in csv.DictReader(path.open()) if row.get("epoch_s")]
+    """The median ``epoch_s`` over the committed epochs of a run's nearest :func:`relatives` that have any."""
+    for pattern in relatives(folder):
+        seconds = []
+        for path in sorted(root.glob(pattern)):
+            with path.open() as rows:
+                seconds += [float(row["epoch_s"]) for row in csv.DictReader(rows) if row.get("epoch_s")]
         if seconds:
             return statistics.median(seconds)
     return None

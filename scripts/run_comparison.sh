@@ -5,7 +5,7 @@
 # docs/results/comparison/ already holds all its epochs is skipped (scripts/pending_runs.py; SKIP_COMMITTED=0 runs it).
 # Commit epochs as they finish with bash scripts/sync_results.sh --every 600. --plan runs nothing: it prints each
 # queued run's epochs done and left, and the hours the rest takes at JOBS runs at a time.
-# Usage: [JOBS=2] bash scripts/run_comparison.sh [--plan] [Hydra overrides]
+# Usage: [JOBS=2] bash scripts/run_comparison.sh [--plan, first] [Hydra overrides]
 set -uo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" = "-h" ] || [ "${1:-}" = "--help" ]; then sed -n '2,8p' "$0" | cut -c3-; exit 0; fi

@@ -1,6 +1,7 @@
 """The scripts: the run queues read without training (PYTHON=echo prints each run's command), and the analyses on tiny real runs."""
 
 import csv
+import importlib.util
 import os
 import subprocess
 import sys
@@ -8,8 +9,10 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+import torch
 from hydra import compose, initialize_config_dir
 from hydra.core.hydra_config import HydraConfig
+from tensordict import TensorDict
 
 from torchrl_cebp.training.config import validate_config
 
@@ -56,9 +59,9 @@ def test_run_comparison_runs_nothing_once_every_run_is_committed(tmp_path):
 def test_pending_runs_skips_a_run_only_once_its_committed_csv_holds_all_its_epochs(tmp_path):
     stage = "+comparison=pick_place_standard sampler=her replay.per_worker=false"  # 20 epochs
     for seed, epochs in (0, 20), (1, 19):
-        csv = tmp_path / "pick_place-standard" / "her" / "paper" / f"seed{seed}" / "progress.csv"
-        csv.parent.mkdir(parents=True)
-        csv.write_text("epoch,test_success\n" + "".join(f"{epoch},0.5\n" for epoch in range(epochs)))
+        progress = tmp_path / "pick_place-standard" / "her" / "paper" / f"seed{seed}" / "progress.csv"
+        progress.parent.mkdir(parents=True)
+        progress.write_text("epoch,test_success\n" + "".join(f"{epoch},0.5\n" for epoch in range(epochs)))
     queue = "".join(f"{stage} seed={seed}\n" for seed in range(3))
     out = subprocess.run(
         [sys.executable, "scripts/pending_runs.py", "--committed", str(tmp_path)], cwd=REPO, input=queue,
@@ -76,9 +79,9 @@ def test_pending_runs_plan_counts_epochs_done_here_or_committed_and_prices_them_
         (committed, "cper/paper-per_worker/seed0", 20, 10),  # a farther relative, not used
         (runs, "her/paper/seed1", 5, 1),  # finished here, resumable, not yet committed
     ):
-        csv = root / "pick_place-standard" / folder / "progress.csv"
-        csv.parent.mkdir(parents=True)
-        csv.write_text("epoch,epoch_s\n" + "".join(f"{epoch},{seconds}\n" for epoch in range(epochs)))
+        progress = root / "pick_place-standard" / folder / "progress.csv"
+        progress.parent.mkdir(parents=True)
+        progress.write_text("epoch,epoch_s\n" + "".join(f"{epoch},{seconds}\n" for epoch in range(epochs)))
     out = subprocess.run(
         [sys.executable, "scripts/pending_runs.py", "--plan", "--jobs", "2", "--committed", str(committed),
          "--runs", str(runs)], cwd=REPO, input="".join(f"{stage} seed={seed}\n" for seed in range(3)),
@@ -114,10 +117,51 @@ def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tm
     assert "mep" in out.stdout and "moved" in out.stdout and (tmp_path / "draws.png").stat().st_size > 10_000
 
 
+def _script(name: str):
+    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_pending_runs_prices_a_run_by_ever_farther_relatives():
+    pending_runs = _script("pending_runs")
+    assert pending_runs.relatives(Path("push-standard/cebp_initial/paper-per_worker-beta0/seed0")) == [
+        "push-standard/cebp_initial/paper-per_worker-beta0/*/progress.csv",
+        "push-standard/cebp_initial/paper-per_worker*/*/progress.csv",
+        "push-standard/cebp_initial/paper*/*/progress.csv",
+        "push-standard/cebp_initial/*/*/progress.csv",
+        "push-standard/**/progress.csv",
+    ]
+
+
+def test_compare_draws_reads_each_episodes_valid_steps_only():
+    compare_draws = _script("compare_draws")
+    steps = 4
+    start = torch.tensor([1.3, 0.7, 0.42])
+    achieved = start.expand(3, steps, 3).clone()
+    next_achieved = achieved.clone()
+    next_achieved[0, 2:, 0] += 0.02  # episode 0 pushes its object 2 cm
+    next_achieved[2, 2:] = 0.0  # episode 2 ended after 2 steps: the rest is padding
+    touch, reward, done = torch.zeros(3, steps, 2), -torch.ones(3, steps, 1), torch.zeros(3, steps, 1, dtype=torch.bool)
+    touch[0, 1, 1] = 3.0
+    reward[0, -1] = 0.0
+    done[2, 1] = True
+    touch[2, 3], reward[2, 2:] = 5.0, 0.0  # padding, not read
+    episodes = TensorDict({"achieved_goal": achieved, "next": {"achieved_goal": next_achieved, "touch": touch,
+                                                                "reward": reward, "done": done}}, [3, steps])
+    features = compare_draws.episode_features(episodes, moved_m=0.01)
+    assert {name: flags.tolist() for name, flags in features.items()} == {
+        "moved": [True, False, False], "touched": [True, False, False], "reached": [True, False, False]}
+    shares = compare_draws.draw_shares(torch.tensor([2.0, 1.0, 1.0]), features)
+    assert shares == pytest.approx({"moved": 0.5, "touched": 0.5, "reached": 0.5, "top1%": 0.5})
+
+
 def test_compare_draws_names_the_samplers_it_can_compare():
     out = subprocess.run([sys.executable, "scripts/compare_draws.py", "runs/none", "--samplers", "per"], cwd=REPO,
                          capture_output=True, text=True)
-    assert out.returncode == 2 and "'per' draws no episode priorities here; choose from her, cebp" in out.stderr
+    assert out.returncode == 2
+    assert "'per' is not a sampler config that draws by episode priority; choose from cebp, cebp_initial" in out.stderr
 
 
 def test_the_sim2real_training_script_resumes_the_shipped_policys_run_with_its_shared_replay():
