@@ -1,10 +1,10 @@
 """The examples run as written, briefly, and what they train on is right."""
-import importlib.util
 from pathlib import Path
 
 import pytest
 import torch
 
+from tests.modules import load_module
 from tests.replay.test_writer import assert_whole_episodes
 from torchrl_cebp.envs import make_env
 from torchrl_cebp.replay import episode_lengths
@@ -13,10 +13,7 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
 def load_example(name):
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_module(EXAMPLES / f"{name}.py")
 
 
 def test_ddpg_her_says_how_to_run_it(capsys):

@@ -1,7 +1,6 @@
 """The scripts: the run queues read without training (PYTHON=echo prints each run's command), and the analyses on tiny real runs."""
 
 import csv
-import importlib.util
 import os
 import subprocess
 import sys
@@ -14,6 +13,7 @@ from hydra import compose, initialize_config_dir
 from hydra.core.hydra_config import HydraConfig
 from tensordict import TensorDict
 
+from tests.modules import load_module
 from torchrl_cebp.training.config import validate_config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -118,10 +118,7 @@ def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tm
 
 
 def _script(name: str):
-    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_module(REPO / "scripts" / f"{name}.py")
 
 
 def test_pending_runs_prices_a_run_by_ever_farther_relatives():
