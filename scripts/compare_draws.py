@@ -12,7 +12,10 @@ probabilities and prints, per sampler:
 - ``touched``: the share on an episode where a finger pad felt something (on robot A nearly all: its pads feel the
   table);
 - ``reached``: the share on an episode that ended at its own goal (its last reward is 0, not -1);
-- ``top1%``: the share on the 1% of stored episodes the sampler ranks highest.
+- ``top1%``: the share on the 1% of stored episodes the sampler ranks highest;
+- ``moved weighted`` and ``top1% weighted``: those episodes' share of the critic loss once the sampler's
+  importance-sampling weights scale their draws (the unweighted share for a sampler without weights). Each worker's
+  weights are taken over its own episodes.
 
 Which episodes a run stored depends on what it replayed, so a run of each sampler gives a different buffer; run it on
 several. PER is left out: its priorities are TD errors, which need the run's critic at each epoch.
@@ -36,14 +39,14 @@ from tensordict import TensorDictBase
 
 from torchrl_cebp.replay import HindsightRelabel, episode_lengths, make_replay_buffer
 from torchrl_cebp.replay.episodes import valid_steps
-from torchrl_cebp.samplers import EpisodePrioritySampler
+from torchrl_cebp.samplers import EpisodePrioritySampler, worker_sampler
 from torchrl_cebp.training.builders import episodes_per_cycle, make_sampler, replay_capacity
 from torchrl_cebp.training.checkpoint import load_checkpoint, stored_episodes
 from torchrl_cebp.training.trainer import sampling_spread
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLER_CONFIGS = REPO / "conf" / "sampler"
-METRICS = ("ess", "moved", "touched", "reached", "top1%")
+METRICS = ("ess", "moved", "touched", "reached", "top1%", "moved weighted", "top1% weighted")
 # Nothing here draws a batch, so HER never computes a reward.
 REWARD_FREE = HindsightRelabel(lambda achieved, goal: torch.zeros(*achieved.shape[:-1], 1))
 
@@ -83,11 +86,15 @@ def episode_features(episodes: TensorDictBase, moved_m: float) -> dict[str, torc
     return {"moved": moved, "touched": touched, "reached": last_reward == 0}
 
 
-def draw_shares(probabilities: torch.Tensor, features: dict[str, torch.Tensor]) -> dict[str, float]:
-    """The shares of one draw over the stored episodes that land on each feature's episodes, and on the top 1%."""
+def draw_shares(probabilities: torch.Tensor, features: dict[str, torch.Tensor],
+                weights: torch.Tensor | None = None) -> dict[str, float]:
+    """The shares of one draw over the stored episodes that land on each feature's episodes and on the top 1%, and
+    the moved and top 1% episodes' shares of the loss under the draw's IS ``weights``."""
     p = probabilities.double() / probabilities.double().sum()
-    top = p.topk(max(p.numel() // 100, 1)).values.sum()
-    return {**{name: p[episodes].sum().item() for name, episodes in features.items()}, "top1%": top.item()}
+    top = p.topk(max(p.numel() // 100, 1)).indices
+    loss = p if weights is None else p * weights.double() / (p * weights.double()).sum()
+    return {**{name: p[episodes].sum().item() for name, episodes in features.items()}, "top1%": p[top].sum().item(),
+            "moved weighted": loss[features["moved"]].sum().item(), "top1% weighted": loss[top].sum().item()}
 
 
 def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str,
@@ -106,8 +113,12 @@ def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str,
             start = epoch * per_epoch + cycle * per_cycle
             replay.extend(episodes[start:start + per_cycle])
         stored = (epoch + 1) * per_epoch
-        shares = draw_shares(sampler.probabilities(torch.arange(stored)),
-                             {key: value[:stored] for key, value in features.items()})
+        probabilities = sampler.probabilities(torch.arange(stored))
+        # Every worker holds as many episodes (a cycle gives each the same number), so the global probability times
+        # the workers is each episode's probability within its worker's draw.
+        workers = getattr(sampler, "workers", 1)
+        weights = worker_sampler(sampler).importance_weights(probabilities * workers, stored // workers)
+        shares = draw_shares(probabilities, {key: value[:stored] for key, value in features.items()}, weights)
         rows.append({"sampler": name, "epoch": epoch, "episodes": stored,
                      "ess": sampling_spread(sampler)["priority_ess_fraction"], **shares})
     return rows
@@ -135,14 +146,18 @@ def plot(rows: list[dict[str, str | int | float]], out: Path, title: str) -> Non
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    figure, axes = plt.subplots(1, len(METRICS), figsize=(3.4 * len(METRICS) + 1.2, 3.2), constrained_layout=True)
+    columns = 4
+    figure, grid = plt.subplots(-(-(len(METRICS) + 1) // columns), columns, figsize=(3.4 * columns, 6.4),
+                                constrained_layout=True)
+    axes, legend_axis = grid.flat[:len(METRICS)], grid.flat[-1]
     for name in dict.fromkeys(row["sampler"] for row in rows):
         mine = [row for row in rows if row["sampler"] == name]
         for axis, metric in zip(axes, METRICS):
             axis.plot([row["epoch"] for row in mine], [row[metric] for row in mine], marker=".", label=name)
     for axis, metric in zip(axes, METRICS):
         axis.set(title=metric, xlabel="epoch (its episodes stored)", ylim=(0, 1.02))
-    figure.legend(*axes[0].get_legend_handles_labels(), loc="outside right center")
+    legend_axis.axis("off")
+    legend_axis.legend(*axes[0].get_legend_handles_labels(), loc="center")
     figure.suptitle(title)
     figure.savefig(out, dpi=110)
 
@@ -169,9 +184,10 @@ def main() -> None:
         print(f"[draws] {name}", file=sys.stderr, flush=True)
         rows += replay_as_written(run_cfg, episodes, name, features)
     print(f"episodes of {args.run_dir} ({run_cfg.sampler._target_.rsplit('.', 1)[-1]}'s run)")
-    print(f"{'sampler':<14}{'epoch':>6}{'episodes':>10}" + "".join(f"{m:>9}" for m in METRICS))
+    widths = {metric: max(len(metric) + 2, 9) for metric in METRICS}
+    print(f"{'sampler':<14}{'epoch':>6}{'episodes':>10}" + "".join(f"{m:>{widths[m]}}" for m in METRICS))
     for row in rows:
-        print(f"{row['sampler']:<14}{row['epoch']:>6}{row['episodes']:>10}" + "".join(f"{row[m]:>9.3f}" for m in METRICS))
+        print(f"{row['sampler']:<14}{row['epoch']:>6}{row['episodes']:>10}" + "".join(f"{row[m]:>{widths[m]}.3f}" for m in METRICS))
     if args.csv:
         with args.csv.open("w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))

@@ -113,6 +113,7 @@ def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tm
         # MEP's ranks hang on each refit's place in the epoch and on its fit's random stream: both as the run had them
         assert float(draws["mep", epoch]["ess"]) == pytest.approx(float(row["priority_ess_fraction"]), rel=1e-6)
         assert float(draws["her", epoch]["ess"]) == pytest.approx(1.0)
+        assert draws["her", epoch]["top1% weighted"] == draws["her", epoch]["top1%"]  # HER weights nothing
         assert int(draws["her", epoch]["episodes"]) == (epoch + 1) * 3 * 2 * 2  # cycles x episodes x workers
     assert "mep" in out.stdout and "moved" in out.stdout and (tmp_path / "draws.png").stat().st_size > 10_000
 
@@ -150,8 +151,9 @@ def test_compare_draws_reads_each_episodes_valid_steps_only():
     features = compare_draws.episode_features(episodes, moved_m=0.01)
     assert {name: flags.tolist() for name, flags in features.items()} == {
         "moved": [True, False, False], "touched": [True, False, False], "reached": [True, False, False]}
-    shares = compare_draws.draw_shares(torch.tensor([2.0, 1.0, 1.0]), features)
-    assert shares == pytest.approx({"moved": 0.5, "touched": 0.5, "reached": 0.5, "top1%": 0.5})
+    shares = compare_draws.draw_shares(torch.tensor([2.0, 1.0, 1.0]), features, weights=torch.tensor([0.5, 1.0, 1.0]))
+    assert shares == pytest.approx({"moved": 0.5, "touched": 0.5, "reached": 0.5, "top1%": 0.5,
+                                    "moved weighted": 1 / 3, "top1% weighted": 1 / 3})  # the weights halve its 0.5
 
 
 def test_compare_draws_names_the_samplers_it_can_compare():
