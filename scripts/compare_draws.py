@@ -15,7 +15,8 @@ probabilities and prints, per sampler:
 - ``top1%``: the share on the 1% of stored episodes the sampler ranks highest;
 - ``moved weighted`` and ``top1% weighted``: those episodes' share of the critic loss once the sampler's
   importance-sampling weights scale their draws (the unweighted share for a sampler without weights). Each worker's
-  weights are taken over its own episodes.
+  weights take its own episode count and draw probabilities; each batch's division by its largest weight, a scale
+  that varies from batch to batch, is left out. Only the critic's loss is weighted: the actor's follows the draw.
 
 Which episodes a run stored depends on what it replayed, so a run of each sampler gives a different buffer; run it on
 several. PER is left out: its priorities are TD errors, which need the run's critic at each epoch.
