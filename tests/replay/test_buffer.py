@@ -1,10 +1,12 @@
 """Episode storage and buffer: wrap-around, checkpoints, and errors that name the key."""
-import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
 from torchrl.data import RoundRobinWriter
 
+from tests.modules import load_module
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, restore, sparse_reward
 from tests.replay.test_her import decode, labelled_episodes
 from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
@@ -209,9 +211,8 @@ def test_a_per_smaller_than_its_storage_rounded_to_whole_episodes_is_refused_at_
         rb.extend(make_episodes(2))
 
 
-def _resident_mib() -> float:
-    with open("/proc/self/statm") as statm:
-        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+# The benchmark's reader, so that the test and the benchmark measure memory alike.
+_resident_mib = load_module(Path(__file__).resolve().parents[2] / "benchmarks" / "replay_memory.py").resident_mib
 
 
 @pytest.mark.parametrize("how", ["written", "restored"])
