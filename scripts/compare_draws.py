@@ -13,10 +13,10 @@ probabilities and prints, per sampler:
   table);
 - ``reached``: the share on an episode that ended at its own goal (its last reward is 0, not -1);
 - ``top1%``: the share on the 1% of stored episodes the sampler ranks highest;
-- ``moved weighted`` and ``top1% weighted``: those episodes' share of the critic loss once the sampler's
-  importance-sampling weights scale their draws (the unweighted share for a sampler without weights). Each worker's
-  weights take its own episode count and draw probabilities; each batch's division by its largest weight, a scale
-  that varies from batch to batch, is left out. Only the critic's loss is weighted: the actor's follows the draw.
+- ``moved weighted`` and ``top1% weighted``: those episodes' expected share of the critic's summed sample weights:
+  draws scaled by the sampler's importance-sampling weights, each worker's over its own episodes, each batch divided
+  by its largest (the draw's own share for a sampler without weights). It is a share of the weights, not of the loss,
+  which also scales with each transition's TD error. Only the critic's loss is weighted: the actor's follows the draw.
 
 Which episodes a run stored depends on what it replayed, so a run of each sampler gives a different buffer; run it on
 several. PER is left out: its priorities are TD errors, which need the run's critic at each epoch.
@@ -37,10 +37,12 @@ from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import InterpolationKeyError
 from tensordict import TensorDictBase
+from torchrl.data.replay_buffers.samplers import Sampler
+from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp.replay import HindsightRelabel, episode_lengths, make_replay_buffer
 from torchrl_cebp.replay.episodes import valid_steps
-from torchrl_cebp.samplers import EpisodePrioritySampler, worker_sampler
+from torchrl_cebp.samplers import EpisodePrioritySampler, PerWorkerSampler
 from torchrl_cebp.training.builders import episodes_per_cycle, make_sampler, replay_capacity
 from torchrl_cebp.training.checkpoint import load_checkpoint, stored_episodes
 from torchrl_cebp.training.trainer import sampling_spread
@@ -88,14 +90,49 @@ def episode_features(episodes: TensorDictBase, moved_m: float) -> dict[str, torc
 
 
 def draw_shares(probabilities: torch.Tensor, features: dict[str, torch.Tensor],
-                weights: torch.Tensor | None = None) -> dict[str, float]:
+                sample_weight: torch.Tensor | None = None) -> dict[str, float]:
     """The shares of one draw over the stored episodes that land on each feature's episodes and on the top 1%, and
-    the moved and top 1% episodes' shares of the loss under the draw's IS ``weights``."""
+    the moved and top 1% episodes' shares of the critic's ``sample_weight`` (the draw's own shares without one)."""
     p = probabilities.double() / probabilities.double().sum()
     top = p.topk(max(p.numel() // 100, 1)).indices
-    loss = p if weights is None else p * weights.double() / (p * weights.double()).sum()
+    loss = p if sample_weight is None else sample_weight.double() / sample_weight.double().sum()
     return {**{name: p[episodes].sum().item() for name, episodes in features.items()}, "top1%": p[top].sum().item(),
             "moved weighted": loss[features["moved"]].sum().item(), "top1% weighted": loss[top].sum().item()}
+
+
+def expected_batch_weights(probabilities: torch.Tensor, weights: torch.Tensor, batch: int) -> torch.Tensor:
+    """Each episode's expected part of one sampler's batch of summed IS weights, each batch divided by its largest.
+
+    A draw of episode ``i`` counts ``w_i / max(w_i, M)``, where ``M`` is the largest weight among the batch's other
+    ``batch - 1`` draws, ``P(M <= m) = F(m)^(batch - 1)`` with ``F(m)`` the draw's mass on weights up to ``m``. So
+    the episode's part is ``p_i w_i E[1 / max(w_i, M)]``: the division lifts the episodes drawn often (small
+    weights) above their ``p_i w_i``.
+    """
+    values, which = torch.unique(weights.double(), sorted=True, return_inverse=True)
+    mass = torch.zeros_like(values).index_add_(0, which, probabilities.double())
+    below_or_at = mass.cumsum(0).clamp(max=1.0)
+    largest_is = below_or_at ** (batch - 1) - (below_or_at - mass).clamp(min=0.0) ** (batch - 1)
+    above = (largest_is / values).flip(0).cumsum(0).flip(0) - largest_is / values
+    expected_inverse = below_or_at ** (batch - 1) / values + above
+    return probabilities.double() * weights.double() * expected_inverse[which]
+
+
+def critic_sample_weight(sampler: Sampler, storage: Storage, stored: int, batch: int) -> torch.Tensor | None:
+    """Each stored episode's expected share of the critic's summed sample weights, with each worker's IS weights over
+    its own episodes and batches of ``batch`` draws; ``None`` for a sampler that weights nothing."""
+    if isinstance(sampler, PerWorkerSampler):
+        shards = [(view.global_rows(torch.arange(view.shape[0])), shard)
+                  for view, shard in zip(sampler.worker_views(storage), sampler.samplers)]
+    else:
+        shards = [(torch.arange(stored), sampler)]
+    part = torch.zeros(stored, dtype=torch.float64)
+    for rows, shard in shards:
+        local = shard.probabilities(torch.arange(rows.numel()))
+        weights = shard.importance_weights(local, shard.n_episodes)
+        if weights is None:
+            return None
+        part[rows] = expected_batch_weights(local, weights, batch)
+    return part / part.sum()
 
 
 def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str,
@@ -106,6 +143,7 @@ def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str,
     replay = make_replay_buffer(sampler, REWARD_FREE, capacity=replay_capacity(cfg), batch_size=1)
     per_cycle, cycles = episodes_per_cycle(cfg), cfg.cycles_per_epoch
     per_epoch = per_cycle * cycles
+    batch = cfg.batch_size if isinstance(sampler, PerWorkerSampler) else cfg.batch_size * cfg.workers
     rows = []
     for epoch in range(episodes.shape[0] // per_epoch):
         for cycle in range(cycles):
@@ -115,11 +153,8 @@ def replay_as_written(run_cfg: DictConfig, episodes: TensorDictBase, name: str,
             replay.extend(episodes[start:start + per_cycle])
         stored = (epoch + 1) * per_epoch
         probabilities = sampler.probabilities(torch.arange(stored))
-        # Every worker holds as many episodes (a cycle gives each the same number), so the global probability times
-        # the workers is each episode's probability within its worker's draw.
-        workers = getattr(sampler, "workers", 1)
-        weights = worker_sampler(sampler).importance_weights(probabilities * workers, stored // workers)
-        shares = draw_shares(probabilities, {key: value[:stored] for key, value in features.items()}, weights)
+        shares = draw_shares(probabilities, {key: value[:stored] for key, value in features.items()},
+                             critic_sample_weight(sampler, replay.storage, stored, batch))
         rows.append({"sampler": name, "epoch": epoch, "episodes": stored,
                      "ess": sampling_spread(sampler)["priority_ess_fraction"], **shares})
     return rows

@@ -1,6 +1,8 @@
 """The scripts: the run queues read without training (PYTHON=echo prints each run's command), and the analyses on tiny real runs."""
 
 import csv
+import itertools
+import math
 import os
 import subprocess
 import sys
@@ -151,9 +153,38 @@ def test_compare_draws_reads_each_episodes_valid_steps_only():
     features = compare_draws.episode_features(episodes, moved_m=0.01)
     assert {name: flags.tolist() for name, flags in features.items()} == {
         "moved": [True, False, False], "touched": [True, False, False], "reached": [True, False, False]}
-    shares = compare_draws.draw_shares(torch.tensor([2.0, 1.0, 1.0]), features, weights=torch.tensor([0.5, 1.0, 1.0]))
+    shares = compare_draws.draw_shares(torch.tensor([2.0, 1.0, 1.0]), features,
+                                       sample_weight=torch.tensor([1.0, 1.0, 1.0]))
     assert shares == pytest.approx({"moved": 0.5, "touched": 0.5, "reached": 0.5, "top1%": 0.5,
-                                    "moved weighted": 1 / 3, "top1% weighted": 1 / 3})  # the weights halve its 0.5
+                                    "moved weighted": 1 / 3, "top1% weighted": 1 / 3})
+
+
+@pytest.mark.parametrize("batch", [2, 3])
+def test_compare_draws_expects_each_batch_divided_by_its_largest_weight(batch):
+    compare_draws = _script("compare_draws")
+    p = torch.tensor([0.5, 0.2, 0.2, 0.1], dtype=torch.float64)
+    w = torch.tensor([0.3, 0.6, 0.6, 1.0], dtype=torch.float64)  # a tie, as equal priorities give
+    others = list(itertools.product(range(4), repeat=batch - 1))  # every draw of the batch's other members
+    brute = [p[i] * sum(math.prod(p[j] for j in rest) * w[i] / max(w[[i, *rest]]) for rest in others)
+             for i in range(4)]
+    assert compare_draws.expected_batch_weights(p, w, batch).tolist() == pytest.approx([float(b) for b in brute])
+
+
+def test_compare_draws_weighs_each_worker_over_its_own_episodes():
+    from tests.replay.conftest import make_episodes, sparse_reward
+    from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+    from torchrl_cebp.samplers import InitialCEBPSampler, PerWorkerSampler
+
+    compare_draws = _script("compare_draws")
+    episodes = make_episodes(300)  # 300 in all, 150 a worker: under the 256 an InitialCEBPSampler weights from
+    for sampler in (InitialCEBPSampler(), PerWorkerSampler(InitialCEBPSampler(), InitialCEBPSampler())):
+        replay = make_replay_buffer(sampler, HindsightRelabel(sparse_reward), capacity=300 * episodes.shape[1])
+        replay.extend(episodes)
+        weight = compare_draws.critic_sample_weight(sampler, replay.storage, 300, batch=256)
+        draw = sampler.probabilities(torch.arange(300)).double()
+        weighs = isinstance(sampler, InitialCEBPSampler)
+        assert torch.allclose(weight, draw / draw.sum()) != weighs, type(sampler).__name__
+
 
 
 def test_compare_draws_names_the_samplers_it_can_compare():
