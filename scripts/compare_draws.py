@@ -95,9 +95,9 @@ def draw_shares(probabilities: torch.Tensor, features: dict[str, torch.Tensor],
     the moved and top 1% episodes' shares of the critic's ``sample_weight`` (the draw's own shares without one)."""
     p = probabilities.double() / probabilities.double().sum()
     top = p.topk(max(p.numel() // 100, 1)).indices
-    loss = p if sample_weight is None else sample_weight.double() / sample_weight.double().sum()
+    weighed = p if sample_weight is None else sample_weight.double() / sample_weight.double().sum()
     return {**{name: p[episodes].sum().item() for name, episodes in features.items()}, "top1%": p[top].sum().item(),
-            "moved weighted": loss[features["moved"]].sum().item(), "top1% weighted": loss[top].sum().item()}
+            "moved weighted": weighed[features["moved"]].sum().item(), "top1% weighted": weighed[top].sum().item()}
 
 
 def expected_batch_weights(probabilities: torch.Tensor, weights: torch.Tensor, batch: int) -> torch.Tensor:

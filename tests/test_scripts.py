@@ -96,12 +96,10 @@ def test_pending_runs_plan_counts_epochs_done_here_or_committed_and_prices_them_
 
 
 def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tmp_path):
+    from tests.training.test_training import config
     from torchrl_cebp.training import train
 
-    tiny = ["epochs=2", "cycles_per_epoch=3", "updates_per_cycle=2", "batch_size=16", "test_episodes=1",
-            "replay.capacity=5000", "agent.hidden=[32,32]", "workers=2", "sampler=mep", "env=push"]
-    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
-        train(compose("config", overrides=tiny), tmp_path)
+    train(config("sampler=mep", "env=push", "cycles_per_epoch=3", "workers=2"), tmp_path)
     out = subprocess.run(
         [sys.executable, "scripts/compare_draws.py", str(tmp_path), "--samplers", "mep", "her", "--csv",
          str(tmp_path / "draws.csv"), "--out", str(tmp_path / "draws.png")], cwd=REPO, capture_output=True, text=True,
@@ -184,7 +182,6 @@ def test_compare_draws_weighs_each_worker_over_its_own_episodes():
         draw = sampler.probabilities(torch.arange(300)).double()
         weighs = isinstance(sampler, InitialCEBPSampler)
         assert torch.allclose(weight, draw / draw.sum()) != weighs, type(sampler).__name__
-
 
 
 def test_compare_draws_names_the_samplers_it_can_compare():
