@@ -5,9 +5,10 @@ machine ``runs/`` is gone, so ``resume=true`` would repeat such a run from epoch
 float noise on another); this filter skips it instead, and names each skipped run on stderr. Lines pass through
 unchanged, in order.
 
-With ``--plan`` it runs nothing and passes nothing: it prints each queued run's epochs done (committed, or finished
-in ``runs/`` and resumable there; a run killed between its CSV row and its checkpoint counts one epoch it will redo)
-and left, and how long the rest would take, from the median epoch time of its nearest committed relatives.
+With ``--plan`` it runs nothing and passes nothing: it prints each queued run's epochs done and left, and how long the
+rest would take, from the median epoch time of its nearest committed relatives. Done means all committed, or finished
+in ``runs/`` and resumable there: a run committed in part but absent from ``runs/`` (a new machine) restarts from
+epoch 0, and a run killed between its CSV row and its checkpoint counts one epoch it will redo.
 
     printf '%s\n' "+comparison=push_standard sampler=her seed=0" | python scripts/pending_runs.py
     printf '%s\n' "+comparison=push_standard sampler=her seed=0" | python scripts/pending_runs.py --plan --jobs 2
@@ -75,7 +76,8 @@ def print_plan(queue: list[tuple[Path, int]], committed: Path, runs: Path, jobs:
     epochs_left = seconds_left = 0.0
     unpriced = []
     for folder, epochs in queue:
-        done = min(max(committed_epochs(folder, committed), committed_epochs(folder, runs)), epochs)
+        all_committed = committed_epochs(folder, committed) >= epochs
+        done = epochs if all_committed else min(committed_epochs(folder, runs), epochs)
         left = epochs - done
         seconds = median_epoch_seconds(folder, committed)
         if left and seconds is None:

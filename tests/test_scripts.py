@@ -73,13 +73,14 @@ def test_pending_runs_skips_a_run_only_once_its_committed_csv_holds_all_its_epoc
     assert "skipped, 20 of 20 epochs committed: pick_place-standard/her/paper/seed0" in out.stderr
 
 
-def test_pending_runs_plan_counts_epochs_done_here_or_committed_and_prices_them_by_their_nearest_relatives(tmp_path):
+def test_pending_runs_plan_counts_resumable_or_all_committed_epochs_priced_by_nearest_relatives(tmp_path):
     stage = "+comparison=pick_place_standard sampler=her replay.per_worker=false"  # 20 epochs, in her/paper/
     committed, runs = tmp_path / "committed", tmp_path / "runs"
     for root, folder, epochs, seconds in (
         (committed, "her/paper/seed0", 20, 720),  # the configuration's own seed prices the others
         (committed, "cper/paper-per_worker/seed0", 20, 10),  # a farther relative, not used
         (runs, "her/paper/seed1", 5, 1),  # finished here, resumable, not yet committed
+        (committed, "her/paper/seed2", 7, 720),  # committed in part, not resumable here: restarts from epoch 0
     ):
         progress = root / "pick_place-standard" / folder / "progress.csv"
         progress.parent.mkdir(parents=True)
