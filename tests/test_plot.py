@@ -247,3 +247,17 @@ def test_a_panel_without_runs_shows_the_published_values_alone_and_has_no_table_
           "--out", str(tmp_path / "fig.png"), "--table", "2"])
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and "task" not in line]
     assert len(rows) == 2 and all(row.startswith("| push-standard") for row in rows)
+
+
+@pytest.mark.parametrize("configurations", [1, 14])
+def test_legends_sit_below_their_panels_x_label_however_many_entries(tmp_path, configurations):
+    for n in range(configurations):
+        write_run(tmp_path / f"push-standard/her/paper-{n}/seed0", [0.1, 0.2])
+    write_run(tmp_path / "slide-standard/her/paper/seed0", [0.0, 0.1])
+    fig = draw_sweep(tmp_path, title="a title over both panels")
+    fig.canvas.draw()  # places the x labels
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:
+        legend, label = ax.get_legend().get_window_extent(renderer), ax.xaxis.label.get_window_extent(renderer)
+        assert legend.y1 < label.y0  # display coordinates grow upwards
+        assert legend.y0 >= 0  # and the figure holds it

@@ -311,7 +311,9 @@ def draw_sweep(
         ax.set_ylabel(f"{metric.replace('_', ' ')} (IQM, 95% CI)")
         ax.yaxis.set_tick_params(labelleft=True)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16))
+        # A pad in points (5 of the legend's 8-point font), not in axes fractions, so that the legend clears the
+        # ticks and the x label at any panel height.
+        ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 0), borderaxespad=5)
     if title is not None and len(groups) > 1:
         fig.suptitle(title)
     fig.tight_layout()
