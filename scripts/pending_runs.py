@@ -6,9 +6,10 @@ float noise on another); this filter skips it instead, and names each skipped ru
 unchanged, in order.
 
 With ``--plan`` it runs nothing and passes nothing: it prints each queued run's epochs done and left, and how long the
-rest would take, from the median epoch time of its nearest committed relatives. Done means all committed, or finished
-in ``runs/`` and resumable there: a run committed in part but absent from ``runs/`` (a new machine) restarts from
-epoch 0, and a run killed between its CSV row and its checkpoint counts one epoch it will redo.
+rest would take, from the median epoch time of its nearest committed relatives, scaled to this machine's pace where
+``runs/`` holds epochs of queued runs (committed runs may come from other machines). Done means all committed, or
+finished in ``runs/`` and resumable there: a run committed in part but absent from ``runs/`` (a new machine) restarts
+from epoch 0, and a run killed between its CSV row and its checkpoint counts one epoch it will redo.
 
     printf '%s\n' "+comparison=push_standard sampler=her seed=0" | python scripts/pending_runs.py
     printf '%s\n' "+comparison=push_standard sampler=her seed=0" | python scripts/pending_runs.py --plan --jobs 2
@@ -58,21 +59,37 @@ def relatives(folder: Path) -> list[str]:
             f"{configuration.parent}/*/*/progress.csv", f"{folder.parts[0]}/**/progress.csv"]
 
 
+def epoch_seconds(progress: Path) -> list[float]:
+    """The ``epoch_s`` of each epoch a ``progress.csv`` holds."""
+    with progress.open() as rows:
+        return [float(row["epoch_s"]) for row in csv.DictReader(rows) if row.get("epoch_s")]
+
+
 def median_epoch_seconds(folder: Path, root: Path = COMMITTED) -> float | None:
     """The median ``epoch_s`` over the committed epochs of a run's nearest :func:`relatives` that have any."""
     for pattern in relatives(folder):
-        seconds = []
-        for path in sorted(root.glob(pattern)):
-            with path.open() as rows:
-                seconds += [float(row["epoch_s"]) for row in csv.DictReader(rows) if row.get("epoch_s")]
+        seconds = [s for path in sorted(root.glob(pattern)) for s in epoch_seconds(path)]
         if seconds:
             return statistics.median(seconds)
     return None
 
 
+def machine_pace(queue: list[tuple[Path, int]], committed: Path, runs: Path) -> float | None:
+    """How long this machine's epochs take against the committed ones, which other machines may have run: the median,
+    over the queued runs with epochs in ``runs/``, of their median ``epoch_s`` there over their relatives' committed
+    one (None when no queued run has epochs here)."""
+    ratios = []
+    for folder, _ in queue:
+        here, elsewhere = runs / folder / "progress.csv", median_epoch_seconds(folder, committed)
+        if here.is_file() and elsewhere and (seconds := epoch_seconds(here)):
+            ratios.append(statistics.median(seconds) / elsewhere)
+    return statistics.median(ratios) if ratios else None
+
+
 def print_plan(queue: list[tuple[Path, int]], committed: Path, runs: Path, jobs: int) -> None:
     """Each run's epochs done and left, and the hours the rest takes at ``jobs`` runs at a time."""
     width = max((len(str(folder)) for folder, _ in queue), default=0)
+    pace = machine_pace(queue, committed, runs)
     epochs_left = seconds_left = 0.0
     unpriced = []
     for folder, epochs in queue:
@@ -83,10 +100,11 @@ def print_plan(queue: list[tuple[Path, int]], committed: Path, runs: Path, jobs:
         if left and seconds is None:
             unpriced.append(str(folder))
         epochs_left += left
-        seconds_left += left * (seconds or 0.0)
+        seconds_left += left * (seconds or 0.0) * (pace or 1.0)
         print(f"{str(folder):<{width}}  {done:>3} of {epochs:>3} epochs done  {left:>3} left")
+    at = "" if pace is None else f", times {pace:.2f}, this machine's pace: its runs' epochs against their relatives'"
     print(f"{int(epochs_left)} run-epochs left; about {seconds_left / 3600 / jobs:.1f} hours at {jobs} run(s) at a time "
-          f"(each at the median epoch time of its nearest committed relatives)")
+          f"(each at the median epoch time of its nearest committed relatives{at})")
     if unpriced:
         print(f"no committed relative to price them, so not in the hours: {', '.join(unpriced)}")
 

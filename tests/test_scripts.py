@@ -79,7 +79,7 @@ def test_pending_runs_plan_counts_resumable_or_all_committed_epochs_priced_by_ne
     for root, folder, epochs, seconds in (
         (committed, "her/paper/seed0", 20, 720),  # the configuration's own seed prices the others
         (committed, "cper/paper-per_worker/seed0", 20, 10),  # a farther relative, not used
-        (runs, "her/paper/seed1", 5, 1),  # finished here, resumable, not yet committed
+        (runs, "her/paper/seed1", 5, 360),  # finished here, resumable, not yet committed; this machine is 2x faster
         (committed, "her/paper/seed2", 7, 720),  # committed in part, not resumable here: restarts from epoch 0
     ):
         progress = root / "pick_place-standard" / folder / "progress.csv"
@@ -93,7 +93,8 @@ def test_pending_runs_plan_counts_resumable_or_all_committed_epochs_priced_by_ne
     lines = [" ".join(line.split()) for line in out.stdout.splitlines()]
     assert lines[:3] == [f"pick_place-standard/her/paper/seed{seed} {done} of 20 epochs done {20 - done} left"
                          for seed, done in ((0, 20), (1, 5), (2, 0))]
-    assert lines[3].startswith("35 run-epochs left; about 3.5 hours at 2 run(s) at a time")  # 35 x 720 s / 2 runs
+    assert lines[3].startswith("35 run-epochs left; about 1.8 hours at 2 run(s) at a time")  # 35 x 720 s / 2 / 2 runs
+    assert "times 0.50, this machine's pace" in lines[3]
 
 
 def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tmp_path):
