@@ -6,8 +6,8 @@ float noise on another); this filter skips it instead, and names each skipped ru
 unchanged, in order.
 
 With ``--plan`` it runs nothing and passes nothing: it prints each queued run's epochs done and left, and how long the
-rest would take, from the median epoch time of its nearest committed relatives, scaled to this machine's pace where
-``runs/`` holds epochs of queued runs (committed runs may come from other machines). Done means all committed, or
+rest would take, from the median epoch time of its nearest relatives: this machine's, in ``runs/``, or else the
+committed ones of other machines, scaled to this machine's pace. Done means all committed, or
 finished in ``runs/`` and resumable there: a run committed in part but absent from ``runs/`` (a new machine) restarts
 from epoch 0, and a run killed between its CSV row and its checkpoint counts one epoch it will redo.
 
@@ -65,48 +65,70 @@ def epoch_seconds(progress: Path) -> list[float]:
         return [float(row["epoch_s"]) for row in csv.DictReader(rows) if row.get("epoch_s")]
 
 
-def median_epoch_seconds(folder: Path, root: Path = COMMITTED) -> float | None:
-    """The median ``epoch_s`` over the committed epochs of a run's nearest :func:`relatives` that have any."""
+def tier_seconds(pattern: str, root: Path, skip: frozenset[Path] = frozenset()) -> list[float]:
+    """The ``epoch_s`` of every epoch under ``root`` in run folders matching a :func:`relatives` pattern, but ``skip``."""
+    return [s for path in sorted(root.glob(pattern)) if path.parent.relative_to(root) not in skip
+            for s in epoch_seconds(path)]
+
+
+def median_epoch_seconds(folder: Path, root: Path = COMMITTED, skip: frozenset[Path] = frozenset()) -> float | None:
+    """The median ``epoch_s`` over the epochs under ``root`` of a run's nearest :func:`relatives` that have any."""
     for pattern in relatives(folder):
-        seconds = [s for path in sorted(root.glob(pattern)) for s in epoch_seconds(path)]
-        if seconds:
+        if seconds := tier_seconds(pattern, root, skip):
             return statistics.median(seconds)
     return None
 
 
-def machine_pace(queue: list[tuple[Path, int]], committed: Path, runs: Path) -> float | None:
-    """How long this machine's epochs take against the committed ones, which other machines may have run: the median,
-    over the queued runs with epochs in ``runs/``, of their median ``epoch_s`` there over their relatives' committed
-    one (None when no queued run has epochs here)."""
+def live_folders(runs: Path) -> frozenset[Path]:
+    """The run folders with epochs in ``runs/``: this machine's, committed copies or not."""
+    return frozenset(path.parent.relative_to(runs) for path in runs.glob("**/progress.csv"))
+
+
+def machine_pace(committed: Path, runs: Path) -> float | None:
+    """How long this machine's epochs take against other machines': the median, over the runs in ``runs/``, of their
+    median ``epoch_s`` there over that of their nearest committed relatives not in ``runs/`` (None without either)."""
+    here = live_folders(runs)
     ratios = []
-    for folder, _ in queue:
-        here, elsewhere = runs / folder / "progress.csv", median_epoch_seconds(folder, committed)
-        if here.is_file() and elsewhere and (seconds := epoch_seconds(here)):
+    for folder in here:
+        elsewhere = median_epoch_seconds(folder, committed, skip=here)
+        if elsewhere and (seconds := epoch_seconds(runs / folder / "progress.csv")):
             ratios.append(statistics.median(seconds) / elsewhere)
     return statistics.median(ratios) if ratios else None
+
+
+def price(folder: Path, committed: Path, runs: Path, pace: float | None) -> float | None:
+    """A run's seconds per epoch, from its nearest relatives: this machine's epochs in ``runs/`` where that tier has
+    any, else the other machines' committed ones scaled by :func:`machine_pace` (None when no tier has any)."""
+    here = live_folders(runs)
+    for pattern in relatives(folder):
+        if seconds := tier_seconds(pattern, runs):
+            return statistics.median(seconds)
+        if seconds := tier_seconds(pattern, committed, skip=here):
+            return statistics.median(seconds) * (pace or 1.0)
+    return None
 
 
 def print_plan(queue: list[tuple[Path, int]], committed: Path, runs: Path, jobs: int) -> None:
     """Each run's epochs done and left, and the hours the rest takes at ``jobs`` runs at a time."""
     width = max((len(str(folder)) for folder, _ in queue), default=0)
-    pace = machine_pace(queue, committed, runs)
+    pace = machine_pace(committed, runs)
     epochs_left = seconds_left = 0.0
     unpriced = []
     for folder, epochs in queue:
         all_committed = committed_epochs(folder, committed) >= epochs
         done = epochs if all_committed else min(committed_epochs(folder, runs), epochs)
         left = epochs - done
-        seconds = median_epoch_seconds(folder, committed)
+        seconds = price(folder, committed, runs, pace)
         if left and seconds is None:
             unpriced.append(str(folder))
         epochs_left += left
-        seconds_left += left * (seconds or 0.0) * (pace or 1.0)
+        seconds_left += left * (seconds or 0.0)
         print(f"{str(folder):<{width}}  {done:>3} of {epochs:>3} epochs done  {left:>3} left")
-    at = "" if pace is None else f", times {pace:.2f}, this machine's pace: its runs' epochs against their relatives'"
+    at = "" if pace is None else f"; other machines' times {pace:.2f}, this machine's pace against theirs"
     print(f"{int(epochs_left)} run-epochs left; about {seconds_left / 3600 / jobs:.1f} hours at {jobs} run(s) at a time "
-          f"(each at the median epoch time of its nearest committed relatives{at})")
+          f"(each at the median epoch time of its nearest relatives{at})")
     if unpriced:
-        print(f"no committed relative to price them, so not in the hours: {', '.join(unpriced)}")
+        print(f"no relative to price them, so not in the hours: {', '.join(unpriced)}")
 
 
 def main() -> None:

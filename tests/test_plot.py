@@ -1,4 +1,5 @@
 """The plot command draws a PNG from the runs of a sweep."""
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 from PIL import Image
@@ -261,3 +262,4 @@ def test_legends_sit_below_their_panels_x_label_however_many_entries(tmp_path, c
         legend, label = ax.get_legend().get_window_extent(renderer), ax.xaxis.label.get_window_extent(renderer)
         assert legend.y1 < label.y0  # display coordinates grow upwards
         assert legend.y0 >= 0  # and the figure holds it
+    plt.close(fig)

@@ -79,7 +79,8 @@ def test_pending_runs_plan_counts_resumable_or_all_committed_epochs_priced_by_ne
     for root, folder, epochs, seconds in (
         (committed, "her/paper/seed0", 20, 720),  # the configuration's own seed prices the others
         (committed, "cper/paper-per_worker/seed0", 20, 10),  # a farther relative, not used
-        (runs, "her/paper/seed1", 5, 360),  # finished here, resumable, not yet committed; this machine is 2x faster
+        (runs, "her/paper/seed1", 5, 360),  # finished here, resumable; this machine is 2x faster
+        (committed, "her/paper/seed1", 4, 360),  # its committed copy, which must not read as another machine's pace
         (committed, "her/paper/seed2", 7, 720),  # committed in part, not resumable here: restarts from epoch 0
     ):
         progress = root / "pick_place-standard" / folder / "progress.csv"
@@ -94,7 +95,21 @@ def test_pending_runs_plan_counts_resumable_or_all_committed_epochs_priced_by_ne
     assert lines[:3] == [f"pick_place-standard/her/paper/seed{seed} {done} of 20 epochs done {20 - done} left"
                          for seed, done in ((0, 20), (1, 5), (2, 0))]
     assert lines[3].startswith("35 run-epochs left; about 1.8 hours at 2 run(s) at a time")  # 35 x 720 s / 2 / 2 runs
-    assert "times 0.50, this machine's pace" in lines[3]
+    assert "other machines' times 0.50, this machine's pace" in lines[3]
+
+
+def test_machine_pace_compares_this_machines_runs_with_other_machines_relatives_only(tmp_path):
+    pending_runs = _script("pending_runs")
+    committed, runs = tmp_path / "committed", tmp_path / "runs"
+    for root in committed, runs:  # a run of this machine and its committed copy, nothing else
+        progress = root / "push-standard" / "her" / "paper" / "seed0" / "progress.csv"
+        progress.parent.mkdir(parents=True)
+        progress.write_text("epoch,epoch_s\n0,200\n")
+    assert pending_runs.machine_pace(committed, runs) is None  # not 1.0: the copy is no other machine's pace
+    other = committed / "push-standard" / "her" / "paper" / "seed1" / "progress.csv"
+    other.parent.mkdir(parents=True)
+    other.write_text("epoch,epoch_s\n0,800\n")
+    assert pending_runs.machine_pace(committed, runs) == 0.25
 
 
 def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tmp_path):
