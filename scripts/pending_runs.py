@@ -96,29 +96,29 @@ def machine_pace(committed: Path, runs: Path) -> float | None:
     return statistics.median(ratios) if ratios else None
 
 
-def price(folder: Path, committed: Path, runs: Path, pace: float | None) -> float | None:
+def price(folder: Path, committed: Path, runs: Path, here: frozenset[Path], pace: float | None) -> float | None:
     """A run's seconds per epoch, from its nearest relatives: this machine's epochs in ``runs/`` where that tier has
-    any, else the other machines' committed ones scaled by :func:`machine_pace` (None when no tier has any)."""
-    here = live_folders(runs)
+    any, else the committed ones of other machines (not in ``here``, the :func:`live_folders`) scaled by
+    :func:`machine_pace` (None when no tier has any)."""
     for pattern in relatives(folder):
         if seconds := tier_seconds(pattern, runs):
             return statistics.median(seconds)
         if seconds := tier_seconds(pattern, committed, skip=here):
-            return statistics.median(seconds) * (pace or 1.0)
+            return statistics.median(seconds) * (1.0 if pace is None else pace)
     return None
 
 
 def print_plan(queue: list[tuple[Path, int]], committed: Path, runs: Path, jobs: int) -> None:
     """Each run's epochs done and left, and the hours the rest takes at ``jobs`` runs at a time."""
     width = max((len(str(folder)) for folder, _ in queue), default=0)
-    pace = machine_pace(committed, runs)
+    here, pace = live_folders(runs), machine_pace(committed, runs)
     epochs_left = seconds_left = 0.0
     unpriced = []
     for folder, epochs in queue:
         all_committed = committed_epochs(folder, committed) >= epochs
         done = epochs if all_committed else min(committed_epochs(folder, runs), epochs)
         left = epochs - done
-        seconds = price(folder, committed, runs, pace)
+        seconds = price(folder, committed, runs, here, pace)
         if left and seconds is None:
             unpriced.append(str(folder))
         epochs_left += left
