@@ -408,7 +408,7 @@ def test_unknown_logger_is_refused_with_the_valid_ones():
         validate_config(config("logger=tb"))
 
 
-def test_every_row_names_the_commit_it_ran_on(tmp_path):
+def test_every_row_names_the_commit_and_the_cpu_kernels_it_ran_on(tmp_path):
     if subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True).returncode != 0:
         pytest.skip("not a git checkout")
     log = rows(train(config("epochs=1"), tmp_path))
@@ -421,6 +421,7 @@ def test_every_row_names_the_commit_it_ran_on(tmp_path):
     assert git("merge-base", "--is-ancestor", commit, "HEAD") == 0, commit
     assert git("diff", "--quiet", commit, "HEAD", "--", *RUN_SOURCES) == 0, f"the run's code changed since {commit}"
     assert float(log[0]["load_avg"]) >= 0.0
+    assert log[0]["cpu_capability"] == torch.backends.cpu.get_cpu_capability()
 
 
 def test_per_resumes_its_beta(tmp_path):

@@ -8,6 +8,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
+import torch
 from torchrl.record.loggers import Logger, get_logger
 
 CSV_NAME = "progress.csv"
@@ -119,8 +120,23 @@ class EpochCsv:
             csv.DictWriter(f, fieldnames=self._fields).writerow(row)
 
 
+def cpu_capability() -> str:
+    """The instruction set torch's CPU kernels dispatch to on this machine: ``AVX512``, ``AVX2``, ...
+
+    Float rounding differs between them, so one seed on two such machines gives two runs that diverge as two
+    seeds would; every CSV row names it, beside its code's commit.
+
+    Example:
+        >>> cpu_capability() in {"DEFAULT", "NO AVX", "AVX2", "AVX512", "Z VECTOR", "VSX", "SVE256"}
+        True
+    """
+    return torch.backends.cpu.get_cpu_capability()
+
+
 class EpochLog:
-    """Where an epoch's row goes: ``run_dir/progress.csv`` (with the code's commit) and the configured TorchRL logger.
+    """Where an epoch's row goes: ``run_dir/progress.csv`` and the configured TorchRL logger.
+
+    Every CSV row names the code's commit and the CPU's kernels (:func:`cpu_capability`) it ran on.
 
     Example:
         >>> import tempfile, pathlib
@@ -128,7 +144,7 @@ class EpochLog:
         ...     log = EpochLog(d, start_epoch=0, logger="none")
         ...     log.write(0, {"test_success": 0.5})
         ...     log.csv_path.read_text().splitlines()[0]
-        'epoch,test_success,code_commit'
+        'epoch,test_success,code_commit,cpu_capability'
     """
 
     def __init__(self, run_dir: str | Path, start_epoch: int, logger: str, labels: dict[str, str] | None = None) -> None:
@@ -136,7 +152,7 @@ class EpochLog:
         self._csv = EpochCsv(self.csv_path, start_epoch)
         self._logger = make_logger(logger, run_dir)
         # Text columns that say what ran (e.g. the replay layout): in every CSV row, never logged as scalars.
-        self._labels = {**(labels or {}), "code_commit": code_version()}
+        self._labels = {**(labels or {}), "code_commit": code_version(), "cpu_capability": cpu_capability()}
 
     def write(self, epoch: int, row: dict[str, float]) -> None:
         self._csv.write({"epoch": epoch, **row, **self._labels})
