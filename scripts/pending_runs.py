@@ -71,7 +71,7 @@ def tier_seconds(pattern: str, root: Path, skip: frozenset[Path] = frozenset()) 
             for s in epoch_seconds(path)]
 
 
-def median_epoch_seconds(folder: Path, root: Path = COMMITTED, skip: frozenset[Path] = frozenset()) -> float | None:
+def median_epoch_seconds(folder: Path, root: Path, skip: frozenset[Path] = frozenset()) -> float | None:
     """The median ``epoch_s`` over the epochs under ``root`` of a run's nearest :func:`relatives` that have any."""
     for pattern in relatives(folder):
         if seconds := tier_seconds(pattern, root, skip):
@@ -84,10 +84,10 @@ def live_folders(runs: Path) -> frozenset[Path]:
     return frozenset(path.parent.relative_to(runs) for path in runs.glob("**/progress.csv"))
 
 
-def machine_pace(committed: Path, runs: Path) -> float | None:
-    """How long this machine's epochs take against other machines': the median, over the runs in ``runs/``, of their
-    median ``epoch_s`` there over that of their nearest committed relatives not in ``runs/`` (None without either)."""
-    here = live_folders(runs)
+def machine_pace(committed: Path, runs: Path, here: frozenset[Path]) -> float | None:
+    """How long this machine's epochs take against other machines': the median, over the runs in ``runs/`` (``here``,
+    the :func:`live_folders`), of their median ``epoch_s`` there over that of their nearest committed relatives not
+    in ``runs/`` (None without either)."""
     ratios = []
     for folder in here:
         elsewhere = median_epoch_seconds(folder, committed, skip=here)
@@ -111,7 +111,8 @@ def price(folder: Path, committed: Path, runs: Path, here: frozenset[Path], pace
 def print_plan(queue: list[tuple[Path, int]], committed: Path, runs: Path, jobs: int) -> None:
     """Each run's epochs done and left, and the hours the rest takes at ``jobs`` runs at a time."""
     width = max((len(str(folder)) for folder, _ in queue), default=0)
-    here, pace = live_folders(runs), machine_pace(committed, runs)
+    here = live_folders(runs)
+    pace = machine_pace(committed, runs, here)
     epochs_left = seconds_left = 0.0
     unpriced = []
     for folder, epochs in queue:

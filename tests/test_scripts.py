@@ -105,11 +105,11 @@ def test_machine_pace_compares_this_machines_runs_with_other_machines_relatives_
         progress = root / "push-standard" / "her" / "paper" / "seed0" / "progress.csv"
         progress.parent.mkdir(parents=True)
         progress.write_text("epoch,epoch_s\n0,200\n")
-    assert pending_runs.machine_pace(committed, runs) is None  # not 1.0: the copy is no other machine's pace
+    assert pending_runs.machine_pace(committed, runs, pending_runs.live_folders(runs)) is None  # not 1.0: the copy is no other machine's pace
     other = committed / "push-standard" / "her" / "paper" / "seed1" / "progress.csv"
     other.parent.mkdir(parents=True)
     other.write_text("epoch,epoch_s\n0,800\n")
-    assert pending_runs.machine_pace(committed, runs) == 0.25
+    assert pending_runs.machine_pace(committed, runs, pending_runs.live_folders(runs)) == 0.25
 
 
 def test_compare_draws_replays_a_runs_episodes_to_the_draw_the_run_itself_had(tmp_path):

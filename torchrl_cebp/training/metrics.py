@@ -120,23 +120,11 @@ class EpochCsv:
             csv.DictWriter(f, fieldnames=self._fields).writerow(row)
 
 
-def cpu_capability() -> str:
-    """The instruction set torch's CPU kernels dispatch to on this machine: ``AVX512``, ``AVX2``, ...
-
-    Float rounding differs between them, so one seed on two such machines gives two runs that diverge as two
-    seeds would; every CSV row names it, beside its code's commit.
-
-    Example:
-        >>> cpu_capability() in {"DEFAULT", "NO AVX", "AVX2", "AVX512", "Z VECTOR", "VSX", "SVE256"}
-        True
-    """
-    return torch.backends.cpu.get_cpu_capability()
-
-
 class EpochLog:
     """Where an epoch's row goes: ``run_dir/progress.csv`` and the configured TorchRL logger.
 
-    Every CSV row names the code's commit and the CPU's kernels (:func:`cpu_capability`) it ran on.
+    Every CSV row names the code's commit and the instruction set torch's CPU kernels dispatched to (``AVX512``,
+    ``AVX2``, ...) it ran on.
 
     Example:
         >>> import tempfile, pathlib
@@ -152,7 +140,12 @@ class EpochLog:
         self._csv = EpochCsv(self.csv_path, start_epoch)
         self._logger = make_logger(logger, run_dir)
         # Text columns that say what ran (e.g. the replay layout): in every CSV row, never logged as scalars.
-        self._labels = {**(labels or {}), "code_commit": code_version(), "cpu_capability": cpu_capability()}
+        # Float rounding differs between CPU kernel sets, so one seed diverges across machines as two seeds would.
+        self._labels = {
+            **(labels or {}),
+            "code_commit": code_version(),
+            "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        }
 
     def write(self, epoch: int, row: dict[str, float]) -> None:
         self._csv.write({"epoch": epoch, **row, **self._labels})
