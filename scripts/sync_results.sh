@@ -7,10 +7,9 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 every=0
-results=(docs/results/comparison docs/results/learning docs/results/sim2real)
 [ "${1:-}" = "--every" ] && every=${2:?--every needs seconds}
 sync_once() {
-  local changed=0
+  local copied=()
   while IFS= read -r csv; do
     case "$csv" in
       runs/learning/*) dest="docs/results/learning/collectors/${csv#runs/learning/}" ;;
@@ -24,12 +23,13 @@ sync_once() {
       continue
     fi
     if ! cmp -s "$csv" "$dest"; then
-      mkdir -p "$(dirname "$dest")" && cp "$csv" "$dest" && changed=1
+      mkdir -p "$(dirname "$dest")" && cp "$csv" "$dest" && copied+=("$dest")
     fi
   done < <(find runs -path runs/quick -prune -o -name progress.csv -print 2>/dev/null | sort)
-  if [ "$changed" = 1 ]; then
-    git add "${results[@]}"
-    git commit -q -m "Results: epochs finished by $(date -u +%H:%MZ)" -- "${results[@]}" \
+  # Only the copied CSVs: other edits under docs/results/ (a figure being redrawn) are not this script's to commit.
+  if [ "${#copied[@]}" -gt 0 ]; then
+    git add -- "${copied[@]}"
+    git commit -q -m "Results: finished epochs" -- "${copied[@]}" \
       && echo "[sync] $(date -u +%TZ) committed"
   fi
 }
