@@ -1,4 +1,4 @@
-"""Can the Franka pick-and-place be learnt as Fetch PickAndPlace is? The checks of issue 29, before any training.
+"""Can the Franka pick-and-place be learnt as Fetch PickAndPlace is? The checks made before any training.
 
 Each check runs the real MuJoCo envs through their public API (the Franka env and gymnasium-robotics' Fetch
 PickAndPlace with touch pads, standard goals: the one the paper's HER learns to lift by about epoch 20):

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 29's Franka pick-and-place training (docs/results/sim2real/diagnosis.md): CEBP at the paper's 8-worker scale,
+# The Franka pick-and-place training (docs/results/sim2real/diagnosis.md): CEBP at the paper's 8-worker scale,
 # 800 env steps per cycle (Fetch's 0.05 updates per env step), 50 epochs, one core. EPISODE_STEPS=50 (default:
 # Fetch PickAndPlace's, two episodes per worker per cycle) or 100 (the paper's Franka episodes, one per worker);
 # GRASPED_START=0.5 (default: half the training episodes begin with the cube grasped, the HER paper's aid) or 0.

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# Ships a trained Franka pick-and-place policy (issue 29). Scores POLICY (a policy file, run directory or checkpoint)
+# Ships a trained Franka pick-and-place policy. Scores POLICY (a policy file, run directory or checkpoint)
 # on 100 fresh plain-simulation episodes of the loop's length (100 steps, whatever length it trained on) and, if it
 # reaches 0.8, writes its actor and normaliser as the shipped policy (torchrl_cebp/sim2real/policies/); then runs the
 # 50-episode camera loop with two cameras and with one, each beside plain simulation on the same placements (logs in
-# docs/results/sim2real/), and redraws the README's episode MP4. --force ships below 0.8.
+# docs/results/sim2real/), and redraws the episode MP4 (docs/img/sim2real_episode.mp4). --force ships below 0.8.
 # Usage: bash scripts/ship_sim2real_policy.sh POLICY [--force]   (POLICY: e.g. runs/.../seed0/best_policy.pt)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -1,16 +1,40 @@
 """The plot command draws a PNG from the runs of a sweep."""
 import matplotlib.pyplot as plt
+from pathlib import Path
+
 import numpy as np
 import pytest
 from PIL import Image
 
-from torchrl_cebp.plot import collect_sweep, draw_sweep, iqm_band, main, summary_table
+from torchrl_cebp.plot import (
+    SAMPLER_NAMES,
+    collect_sweep,
+    draw_sweep,
+    iqm_band,
+    main,
+    method_label,
+    select_configurations,
+    summary_table,
+)
+
+COMMITTED_RUNS = Path(__file__).parents[1] / "docs" / "results" / "comparison"
 
 
 def write_run(folder, success):
     folder.mkdir(parents=True)
     lines = ["epoch,test_success,loss_actor,epoch_s"] + [f"{e},{s},0.1,60" for e, s in enumerate(success)]
     (folder / "progress.csv").write_text("\n".join(lines) + "\n")
+
+
+def legend(ax):
+    """``{legend label, its wrapped lines joined: line}`` of a panel's curves and markers."""
+    return {line.get_label().replace("\n", " "): line for line in ax.get_lines() if not line.get_label().startswith("_")}
+
+
+def table_rows(out):
+    """``{run folder: cells}`` of the Markdown table rows printed in ``out``."""
+    rows = [line.split(" | ") for line in out.splitlines() if line.startswith("| ") and not line.startswith("| task")]
+    return {cells[2]: cells for cells in rows}
 
 
 def test_plot_groups_seeds_and_draws_a_png(tmp_path, capsys):
@@ -39,7 +63,7 @@ def test_title_replaces_a_single_panels_folder_name_and_tops_several(tmp_path):
     write_run(tmp_path / "sweep/push-extended/her/paper/seed0", [0.0, 0.1])
     write_run(tmp_path / "sweep/slide-extended/her/paper/seed0", [0.0, 0.1])
     fig = draw_sweep(tmp_path / "sweep", title="all tasks")
-    assert [ax.get_title() for ax in fig.axes] == ["push-extended", "slide-extended"]
+    assert [ax.get_title() for ax in fig.axes] == ["Push: extended goals", "Slide: extended goals"]
     assert fig.get_suptitle() == "all tasks"
 
 
@@ -50,9 +74,10 @@ def test_one_task_folder_as_root_is_one_panel_of_its_samplers(tmp_path, capsys):
     groups = collect_sweep(tmp_path / "push-extended", "test_success")
     assert {panel: sorted(labels) for panel, labels in groups.items()} == {"push-extended": ["cebp/paper", "her/paper"]}
     main([str(tmp_path / "push-extended"), "--table", "1", "--improvement-at", "1"])
-    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| push-extended (paper)")]
-    assert [row.split(" | ")[1] for row in rows] == ["cebp", "her"]
-    assert rows[0].split(" | ")[4] == "1.00 [1.00, 1.00]"  # every cebp seed above every her seed
+    rows = table_rows(capsys.readouterr().out)
+    assert list(rows) == ["her/paper", "cebp/paper"]  # HER first
+    assert rows["cebp/paper"][0] == "| Push: extended goals"
+    assert rows["cebp/paper"][5] == "1.00 [1.00, 1.00]"  # every cebp seed above every her seed
     write_run(tmp_path / "learning/collectors/her/seed0", [0.2])  # not the trainer's layout: one panel
     write_run(tmp_path / "learning/cebp/seed0", [0.4])
     assert {panel: sorted(labels) for panel, labels in collect_sweep(tmp_path / "learning", "test_success").items()} == {
@@ -65,7 +90,7 @@ def test_a_sampler_keeps_its_colour_and_fractions_share_one_scale(tmp_path):
     write_run(tmp_path / "push-extended/cebp/paper/seed0", [0.1, 0.8])
     write_run(tmp_path / "push-extended/her/paper/seed0", [0.2, 0.9])
     pick_place, push = draw_sweep(tmp_path).axes
-    her_alone, (cebp, her) = pick_place.get_lines(), push.get_lines()  # the lone her keeps "her/paper" as label
+    her_alone, (her, cebp) = pick_place.get_lines(), push.get_lines()
     assert her_alone[0].get_color() == her.get_color() != cebp.get_color()
     assert pick_place.get_ylim() == push.get_ylim() and pick_place.get_ylim()[1] > 0.8
     unbounded = draw_sweep(tmp_path, metric="epoch_s").axes  # seconds: each task keeps its own scale
@@ -78,15 +103,16 @@ def test_a_sampler_keeps_its_colour_across_variants_and_panels_and_its_variants_
     write_run(tmp_path / "push-standard/cebp_initial/paper-per_worker/seed0", [0.0, 0.3])
     write_run(tmp_path / "slide-standard-T70/her/paper-per_worker/seed0", [0.0, 0.1])
     reference = tmp_path / "paper.csv"
-    reference.write_text("panel,sampler,name,epoch,value\nslide-standard-T70,her,HER (paper),50,0.47\n"
-                         "slide-standard-T70,cper,CPER (paper),50,0.52\n")  # a sampler with no runs
+    reference.write_text("panel,sampler,name,epoch,value\nslide-standard-T70,her,HER (paper),2,0.47\n"
+                         "slide-standard-T70,cper,CPER (paper),2,0.52\n")  # a sampler with no runs
     push, slide = draw_sweep(tmp_path, reference=reference).axes
-    lines = {line.get_label().split(" (")[0]: line for line in push.get_lines()}
-    slide_lines = {line.get_label(): line for line in slide.get_lines()}
-    her_colour = lines["her/paper"].get_color()
-    slide_her = slide_lines["her/paper-per_worker (1 seed)"]
+    lines, slide_lines = legend(push), legend(slide)
+    her_colour = lines["HER (1 seed)"].get_color()
+    slide_her = slide_lines["HER (1 seed)"]
     assert slide_her.get_color() == slide_lines["HER (paper)"].get_color() == her_colour
-    merged, per_worker = lines["cebp_initial/paper"], lines["cebp_initial/paper-per_worker"]
+    merged = lines["CEBP (Initial commit), merged buffer (superseded) (1 seed)"]
+    per_worker = lines["CEBP (Initial commit) (1 seed)"]
+    assert per_worker.get_linestyle() == "-"  # the method as the comparison runs it is solid
     assert merged.get_color() == per_worker.get_color() != her_colour
     assert merged.get_linestyle() != per_worker.get_linestyle()
     cper = slide_lines["CPER (paper)"].get_color()
@@ -102,10 +128,11 @@ def test_tables_out_writes_one_table_per_task_with_the_epochs_its_runs_reached(t
     main([str(tmp_path), "--out", str(tmp_path / "fig.png"), "--table", "2", "3", "--improvement-at", "2", "3",
           "--mean-over", "1", "3", "--tables-out", str(tables)])
     push, slide = tables.read_text().split("### ")[1:]
-    assert push.startswith("push-standard") and slide.startswith("slide-standard-T70")
-    assert "after 3 epochs" not in push and "P(> her) after 2 epochs" in push
-    assert "| cebp | 2 | 0.40 [0.40, 0.40] | 1.00 [1.00, 1.00] |" in push
-    assert "after 3 epochs" in slide and "P(> her) after 3 epochs" in slide
+    assert push.startswith("Push: standard goals (push-standard)")
+    assert slide.startswith("Slide: standard goals, 70-step episodes (slide-standard-T70)")
+    assert "after 3 epochs" not in push and "P(> HER) [95% CI] after 2 epochs" in push
+    assert "| cebp/paper | 2 | 0.40 [0.40, 0.40] | 1.00 [1.00, 1.00] |" in push
+    assert "after 3 epochs" in slide and "P(> HER) [95% CI] after 3 epochs" in slide
     assert "mean over epochs 1-3" in slide and "mean over" not in push
     with pytest.raises(SystemExit):
         main([str(tmp_path), "--tables-out", str(tables)])
@@ -124,7 +151,7 @@ def test_legend_names_the_seeds_behind_each_stretch_of_a_curve(tmp_path):
     write_run(tmp_path / "push-standard/her/paper/seed0", [0.0, 0.1, 0.2, 0.5])
     write_run(tmp_path / "push-standard/her/paper/seed1", [0.0, 0.3])
     (ax,) = draw_sweep(tmp_path).axes
-    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["her/paper (2 seeds to epoch 2, 1 seed to 4)"]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["HER (2 seeds to epoch 2, 1 seed to 4)"]
 
 
 def test_errors_name_the_problem(tmp_path):
@@ -145,18 +172,22 @@ def test_a_metric_some_samplers_do_not_log_draws_those_that_do(tmp_path):
         "cebp/paper": [[0.5, 0.25]]
     }
     (ax,) = draw_sweep(tmp_path, metric="is_weight_mean").axes
-    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["cebp/paper (1 seed)"]
+    assert [text.get_text().replace("\n", " ") for text in ax.get_legend().get_texts()] == [
+        "CEBP (paper form), merged buffer (superseded) (1 seed)"
+    ]
 
 
 def test_table_gives_iqm_and_bootstrap_interval_after_n_epochs(tmp_path, capsys):
     for seed, success in enumerate([[0.0, 0.2], [0.0, 0.4], [0.0, 0.6]]):
-        write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", success)
+        write_run(tmp_path / f"push-extended/cebp/paper-per_worker/seed{seed}", success)
     write_run(tmp_path / "push-extended/her/paper/seed0", [0.1])
     main([str(tmp_path), "--table", "1", "2"])
-    rows = {line.split(" | ")[1]: line for line in capsys.readouterr().out.splitlines() if line.startswith("| push")}
-    # the preset every configuration shares goes to the task column
-    assert rows["cebp"] == "| push-extended (paper) | cebp | 3 | 0.00 [0.00, 0.00] | 0.40 [0.20, 0.60] | 0.1 |"
-    assert rows["her"] == "| push-extended (paper) | her | 1 | 0.10 [0.10, 0.10] | - | 0.0 |"
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
+    assert lines == [
+        "| task | method | run folder | seeds | IQM [95% CI] after 1 epoch | IQM [95% CI] after 2 epochs | training hours |",
+        "| Push: extended goals | HER | her/paper | 1 | 0.10 [0.10, 0.10] | - | 0.0 |",
+        "| Push: extended goals | CEBP (paper form) | cebp/paper-per_worker | 3 | 0.00 [0.00, 0.00] | 0.40 [0.20, 0.60] | 0.1 |",
+    ]
     with pytest.raises(ValueError, match="start at 1"):
         main([str(tmp_path), "--table", "0"])
 
@@ -166,9 +197,10 @@ def test_table_mean_over_a_window_of_epochs(tmp_path, capsys):
         write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", success)
     main([str(tmp_path), "--table", "3", "--mean-over", "2", "3"])
     out = capsys.readouterr().out
-    assert "| task | configuration | seeds | after 3 epochs | mean over epochs 2-3 | training hours |" in out
+    assert ("| task | method | run folder | seeds | IQM [95% CI] after 3 epochs"
+            " | IQM [95% CI] of each seed's mean over epochs 2-3 | training hours |") in out
     # seeds 0 and 1 reached epoch 3: their means over epochs 2-3 are 0.3 and 0.6
-    assert "| push-extended | cebp/paper | 3 | 0.60 [0.40, 0.80] (2 seeds) | 0.45 [0.30, 0.60] (2 seeds) | 0.1 |" in out
+    assert "| cebp/paper | 3 | 0.60 [0.40, 0.80] (2 seeds) | 0.45 [0.30, 0.60] (2 seeds) | 0.1 |" in out
     with pytest.raises(ValueError, match=r"mean_over=\(3, 2\)"):
         main([str(tmp_path), "--table", "3", "--mean-over", "3", "2"])
     with pytest.raises(SystemExit):
@@ -181,10 +213,10 @@ def test_table_probability_of_improvement_over_her(tmp_path, capsys):
         write_run(tmp_path / f"push-extended/her/paper/seed{seed}", [0.0, her])
         write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", [0.0, cebp])
     main([str(tmp_path), "--table", "2", "--improvement-at", "2"])
-    rows = {line.split(" | ")[1]: line for line in capsys.readouterr().out.splitlines() if line.startswith("| push")}
+    rows = table_rows(capsys.readouterr().out)
     # cebp beats her in (3 + 3 + 1) of 9 pairs, ties none: 7/9
-    assert "| 0.78 [" in rows["cebp"]
-    assert "(baseline)" in rows["her"]
+    assert rows["cebp/paper"][5].startswith("0.78 [")
+    assert rows["her/paper"][5] == "(baseline)"
     with pytest.raises(SystemExit):
         main([str(tmp_path), "--improvement-at", "2"])
 
@@ -196,11 +228,12 @@ def test_table_probability_of_improvement_at_several_epochs(tmp_path, capsys):
         write_run(tmp_path / f"push-extended/cebp/paper/seed{seed}", cebp)
     main([str(tmp_path), "--table", "2", "--improvement-at", "1", "2"])
     out = capsys.readouterr().out
-    assert "| after 2 epochs | P(> her) after 1 epoch | P(> her) after 2 epochs | training hours |" in out
-    rows = {line.split(" | ")[1]: line.split(" | ") for line in out.splitlines() if line.startswith("| push")}
+    assert ("| IQM [95% CI] after 2 epochs | P(> HER) [95% CI] after 1 epoch | P(> HER) [95% CI] after 2 epochs"
+            " | training hours |") in out
+    rows = table_rows(out)
     # after 2 epochs cebp has seeds 0-1 (0.3, 0.2) against her's three (0.1, 0.2, 0.4): (2 + 1.5) / 6
-    assert rows["cebp"][4].startswith("0.00 [") and rows["cebp"][5].startswith("0.58 [")
-    assert rows["her"][4:6] == ["(baseline)", "(baseline)"]
+    assert rows["cebp/paper"][5].startswith("0.00 [") and rows["cebp/paper"][6].startswith("0.58 [")
+    assert rows["her/paper"][5:7] == ["(baseline)", "(baseline)"]
     with pytest.raises(ValueError, match="epoch counts start at 1"):
         main([str(tmp_path), "--table", "2", "--improvement-at", "0", "2"])
 
@@ -215,17 +248,26 @@ def test_panels_pick_and_order_the_tasks_and_published_values_are_marked_in_thei
                          "push-standard,cebp_initial,C-Energy (paper),10,0.8\n")
     fig = draw_sweep(tmp_path, panels=["push-standard", "pick_place-standard"], reference=reference)
     push, pick_place = fig.axes
-    assert [push.get_title(), pick_place.get_title()] == ["push-standard (paper)", "pick_place-standard (paper)"]
-    lines = {line.get_label(): line for line in push.get_lines()}
-    assert lines["HER (paper)"].get_xydata().tolist() == [[10, 0.5], [18, 0.97]]
-    assert lines["HER (paper)"].get_color() == lines["her (1 seed)"].get_color()
-    assert lines["C-Energy (paper)"].get_color() == lines["cebp_initial (1 seed)"].get_color()
+    assert [push.get_title(), pick_place.get_title()] == ["Push: standard goals", "PickAndPlace: standard goals"]
+    lines = legend(push)
+    # our runs end at epoch 2: the axis ends there, and the published values past it are noted, not drawn
+    assert "HER (paper)" not in lines and push.get_xlim() == (0, 2.5)
+    assert [text.get_text() for text in push.texts] == [
+        "Past this axis:\nC-Energy (paper) 0.80 at epoch 10\nHER (paper) 0.50 at epoch 10\nHER (paper) 0.97 at epoch 18"
+    ]
+    write_run(tmp_path / "push-standard/her/paper/seed1", [0.1] * 12)
+    (push,) = draw_sweep(tmp_path, panels=["push-standard"], reference=reference).axes
+    lines = legend(push)
+    assert lines["HER (paper)"].get_xydata().tolist() == [[10, 0.5]]
+    assert [text.get_text() for text in push.texts] == ["Past this axis:\nHER (paper) 0.97 at epoch 18"]
+    assert lines["HER (paper)"].get_color() == lines["HER (2 seeds to epoch 2, 1 seed to 12)"].get_color()
+    assert lines["C-Energy (paper)"].get_color() == lines["CEBP (Initial commit), merged buffer (superseded) (1 seed)"].get_color()
     assert lines["HER (paper)"].get_color() != lines["C-Energy (paper)"].get_color()
     assert not any("paper)" in line.get_label() for line in pick_place.get_lines())
     with pytest.raises(KeyError, match=r"no runs for panel\(s\) \['slide-standard'\]"):
         draw_sweep(tmp_path, panels=["slide-standard"])
     table = summary_table(tmp_path, [2], panels=["push-standard"])
-    assert "push-standard" in table and "pick_place-standard" not in table
+    assert "Push: standard goals" in table and "PickAndPlace" not in table
 
 
 def test_a_panel_without_runs_shows_the_published_values_alone_and_has_no_table_rows(tmp_path, capsys):
@@ -236,18 +278,18 @@ def test_a_panel_without_runs_shows_the_published_values_alone_and_has_no_table_
                          "slide-standard-T70,cebp_initial,C-Energy (paper),20,0.3\n")
     fig = draw_sweep(tmp_path, panels=["push-standard", "slide-standard-T70"], reference=reference)
     push, slide = fig.axes
-    assert slide.get_title() == "slide-standard-T70"
+    assert slide.get_title() == "Slide: standard goals, 70-step episodes"
     assert [text.get_text() for text in slide.texts] == ["no runs yet"]
-    markers = {line.get_label(): line for line in slide.get_lines()}
+    markers = legend(slide)
     assert sorted(markers) == ["C-Energy (paper)", "HER (paper)"]
-    assert markers["HER (paper)"].get_color() == {l.get_label(): l for l in push.get_lines()}["her (1 seed)"].get_color()
+    assert markers["HER (paper)"].get_color() == legend(push)["HER (1 seed)"].get_color()
     assert slide.get_xlim()[0] == push.get_xlim()[0] == 0
     with pytest.raises(KeyError, match=r"no runs for panel\(s\) \['slide-standard'\]"):
         draw_sweep(tmp_path, panels=["push-standard", "slide-standard"], reference=reference)  # not published
     main([str(tmp_path), "--panels", "push-standard", "slide-standard-T70", "--reference", str(reference),
           "--out", str(tmp_path / "fig.png"), "--table", "2"])
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ") and "task" not in line]
-    assert len(rows) == 2 and all(row.startswith("| push-standard") for row in rows)
+    assert len(rows) == 2 and all(row.startswith("| Push: standard goals") for row in rows)
 
 
 @pytest.mark.parametrize("configurations", [1, 14])
@@ -263,3 +305,64 @@ def test_legends_sit_below_their_panels_x_label_however_many_entries(tmp_path, c
         assert legend.y1 < label.y0  # display coordinates grow upwards
         assert legend.y0 >= 0  # and the figure holds it
     plt.close(fig)
+
+
+@pytest.mark.bookkeeping
+def test_every_committed_run_folder_is_named_by_its_method_and_superseded_runs_say_so():
+    configurations = {
+        label for curves_by_label in collect_sweep(COMMITTED_RUNS, "test_success").values() for label in curves_by_label
+    }
+    labels = {configuration: method_label(configuration) for configuration in configurations}
+    for configuration, label in labels.items():
+        assert label.split(",")[0].split(" (")[0] in {name.split(" (")[0] for name in SAMPLER_NAMES.values()}
+        assert "/" not in label and "_" not in label, label  # no folder syntax left
+        superseded = "wnorm" in configuration or (
+            not configuration.startswith("her/") and "per_worker" not in configuration
+        ) or (configuration.startswith("cper/") and "her_past" not in configuration)
+        assert label.endswith("(superseded)") == superseded, (configuration, label)
+    assert labels["cebp_initial/paper-per_worker"] == "CEBP (Initial commit)"
+    assert labels["cebp_initial/paper-per_worker-wnorm"] == "CEBP (Initial commit), normalised loss (superseded)"
+    assert labels["cebp_initial/paper-per_worker-beta0"] == "CEBP (Initial commit), no IS weights"
+    assert labels["cebp/paper-wnorm"] == "CEBP (paper form), merged buffer, normalised loss (superseded)"
+    assert labels["cper/paper-per_worker-her_past"] == "CPER"
+    assert labels["cebp_released/paper"] == "CEBP (released code), merged buffer (superseded)"
+    assert {labels[f"{s}/paper-per_worker"] for s in ("per", "ebp", "mep")} == {"PER", "EBP", "MEP"}
+    assert method_label("cebp_T0.01/paper-per_worker") == "CEBP (paper form), T = 0.01"
+    assert method_label("my_sampler/paper-per_worker-lr3") == "my_sampler, lr3"  # unknown parts kept, not dropped
+
+
+def test_every_table_column_says_what_its_cells_are(capsys):
+    main([str(COMMITTED_RUNS), "--out", "/dev/null", "--panels", "push-standard", "--table", "10",
+          "--improvement-at", "10"])
+    header = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| task"))
+    assert header == ("| task | method | run folder | seeds | IQM [95% CI] after 10 epochs"
+                      " | P(> HER) [95% CI] after 10 epochs | training hours |")
+
+
+def test_a_tail_only_some_seeds_reached_is_dotted_without_a_band(tmp_path):
+    write_run(tmp_path / "push-standard/her/paper/seed0", [0.0, 0.1, 0.2, 0.5])
+    write_run(tmp_path / "push-standard/her/paper/seed1", [0.0, 0.3])
+    (ax,) = draw_sweep(tmp_path).axes
+    solid, tail = ax.get_lines()
+    assert solid.get_xdata().tolist() == [1, 2] and solid.get_linestyle() == "-"
+    assert tail.get_xdata().tolist() == [2, 3, 4] and tail.get_linestyle() == ":" and tail.get_label().startswith("_")
+    (band,) = ax.collections
+    assert band.get_paths()[0].vertices[:, 0].max() == 2  # the band covers the epochs all seeds reached
+    assert "dotted: epochs that only some seeds reached" in ax.figure.texts[0].get_text()
+
+
+def test_configurations_keep_the_methods_asked_for_and_their_published_values(tmp_path):
+    for sampler in ("her", "cebp_initial", "cper"):
+        write_run(tmp_path / f"push-standard/{sampler}/paper-per_worker/seed0", [0.1] * 10)
+    write_run(tmp_path / "slide-standard/cper/paper-per_worker-her_past/seed0", [0.1] * 10)
+    reference = tmp_path / "paper.csv"
+    reference.write_text("panel,sampler,name,epoch,value\npush-standard,her,HER (paper),10,0.5\n"
+                         "push-standard,cper,CPER (paper),10,0.15\n")
+    (push,) = draw_sweep(tmp_path, configurations=["her/*", "cebp_initial/*"], reference=reference).axes
+    assert sorted(legend(push)) == ["CEBP (Initial commit) (1 seed)", "HER (1 seed)", "HER (paper)"]
+    with pytest.raises(KeyError, match=r"no configuration matches \['per/\*'\]"):
+        select_configurations(collect_sweep(tmp_path, "test_success"), ["her/*", "per/*"])
+    with pytest.raises(KeyError, match="reference_panel='slide-standard' has no published values"):
+        draw_sweep(tmp_path, reference=reference, reference_panel="slide-standard")
+    push, slide = draw_sweep(tmp_path, reference=reference, reference_panel="push-standard").axes
+    assert sorted(legend(slide)) == ["CPER (1 seed)", "CPER (paper)", "HER (paper)"]  # push's values on every panel

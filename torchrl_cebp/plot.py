@@ -1,12 +1,13 @@
-"""Success curves of a sweep: interquartile mean (IQM) over seeds with a 95% bootstrap interval, per sampler and task.
+"""Success curves of a sweep: interquartile mean (IQM) over seeds with a 95% bootstrap interval, per method and task.
 
     python -m torchrl_cebp.plot runs                      # writes runs/test_success.png
     python -m torchrl_cebp.plot runs --out fig.png --metric test_success --title "FetchPush"
     python -m torchrl_cebp.plot runs --table 5 10         # and prints a Markdown table after 5 and 10 epochs
-    python -m torchrl_cebp.plot runs --table 5 10 --improvement-at 10   # and P(sampler > her) after 10 epochs
-    python -m torchrl_cebp.plot runs --table 10 15 --improvement-at 10 15   # P(sampler > her) after 10 and after 15
+    python -m torchrl_cebp.plot runs --table 5 10 --improvement-at 10   # and P(method > HER) after 10 epochs
+    python -m torchrl_cebp.plot runs --table 10 15 --improvement-at 10 15   # P(method > HER) after 10 and after 15
     python -m torchrl_cebp.plot runs --table 10 --mean-over 6 10   # and each seed's mean over epochs 6-10
     python -m torchrl_cebp.plot runs --panels pick_place-standard push-standard --reference docs/results/paper_fig2.csv
+    python -m torchrl_cebp.plot runs --configurations 'her/*' 'cper/*'   # these methods only
 
 The statistics follow rliable's conventions (:mod:`torchrl_cebp.stats`): IQM, stratified-bootstrap
 95% confidence intervals, and the probability of improvement over a baseline configuration.
@@ -14,12 +15,16 @@ The statistics follow rliable's conventions (:mod:`torchrl_cebp.stats`): IQM, st
 A run is any folder holding a ``progress.csv``; runs are grouped by their parent folder (the
 seeds of one configuration), and one panel is drawn per top-level folder under the sweep root
 (``<task>-<goal_space>[-<robot>]`` with the trainer's layout
-``runs/<task>-<goal_space>[-<robot>]/<sampler>/<preset>/seed<k>``).
+``runs/<task>-<goal_space>[-<robot>]/<sampler>/<preset>/seed<k>``). Figures and tables name a configuration
+``<sampler>/<variant>`` by its method (:func:`method_label`, from :data:`SAMPLER_NAMES` and :data:`VARIANT_NAMES`)
+and a panel by its task in words (:func:`panel_title`); tables give the run folder beside the method.
 """
 from __future__ import annotations
 
 import argparse
 import csv
+import fnmatch
+import re
 import textwrap
 from collections import defaultdict
 from collections.abc import Collection, Sequence
@@ -89,22 +94,109 @@ def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarra
     return groups
 
 
-def short_labels(panel: str, labels: list[str]) -> tuple[str, dict[str, str]]:
-    """The panel's title and its labels, the parts every label shares (e.g. the preset) moved to the title.
+SAMPLER_NAMES = {
+    "her": "HER",
+    "cebp_initial": "CEBP (Initial commit)",
+    "cebp": "CEBP (paper form)",
+    "cebp_released": "CEBP (released code)",
+    "cper": "CPER",
+    "per": "PER",
+    "ebp": "EBP",
+    "mep": "MEP",
+}
+"""The method a sampler folder runs, as readers know it; legends and tables list methods in this order."""
+TEMPERATURE_FOLDER = re.compile(r"cebp_T(?P<temperature>.+)")  # the temperature ablation's folders, cebp_T<T>
+VARIANT_NAMES = {"wnorm": "normalised loss", "beta0": "no IS weights", "her_past": "'past' HER draw"}
+"""What a part of a run folder's variant (``<preset>[-per_worker][-her_past][-wnorm][-beta0]``) changes."""
+PUBLISHED_VARIANT_PARTS = {"cper": "her_past"}
+"""A sampler's published form, named by nothing in its labels; without it the label says what ran instead."""
+SUPERSEDED = ("merged buffer", "normalised loss", "'future' HER draw")
+"""Qualifiers of runs that an emulation fix replaced; their labels say "(superseded)"."""
+PAPER_PRESET = "paper"  # 8 workers, so a prioritised sampler's run without -per_worker drew from one merged buffer
+TASK_NAMES = {
+    "push": "Push", "pick_place": "PickAndPlace", "slide": "Slide", "franka_pick_place": "Franka PickAndPlace"
+}
+PANEL_PART_NAMES = {
+    "standard": "standard goals",
+    "extended": "extended goals",
+    "joint": "joint control",
+    "tableblind": "table-blind pads",
+    "grasped50": "half the training episodes start grasped",
+}
+
+
+def sampler_name(sampler: str) -> str:
+    """The method a sampler folder runs (:data:`SAMPLER_NAMES`); an unknown folder keeps its name.
 
     Examples:
-        >>> short_labels("push-extended", ["cebp/paper", "her/paper"])
-        ('push-extended (paper)', {'cebp/paper': 'cebp', 'her/paper': 'her'})
-        >>> short_labels("push-extended", ["her/paper"])
-        ('push-extended', {'her/paper': 'her/paper'})
+        >>> sampler_name("cebp_initial"), sampler_name("cebp_T0.01"), sampler_name("my_sampler")
+        ('CEBP (Initial commit)', 'CEBP (paper form), T = 0.01', 'my_sampler')
     """
-    split = [label.split("/") for label in labels]
-    shared = [] if len(labels) < 2 else [
-        i for i, part in enumerate(split[0]) if all(len(s) == len(split[0]) and s[i] == part for s in split)
+    if sampler in SAMPLER_NAMES:
+        return SAMPLER_NAMES[sampler]
+    temperature = TEMPERATURE_FOLDER.fullmatch(sampler)
+    if temperature:
+        return f"{SAMPLER_NAMES['cebp']}, T = {temperature['temperature']}"
+    return sampler
+
+
+def method_label(label: str) -> str:
+    """The name a reader knows for a configuration label ``<sampler>/<variant>`` (a run folder below its task).
+
+    The sampler folder names the method (:data:`SAMPLER_NAMES`); the variant's parts say what differs from the
+    method as the comparison runs it (the paper preset, per-worker replay, baselines' critic loss, the sampler's
+    published HER draw), and a superseded emulation (:data:`SUPERSEDED`) is marked so. Parts this mapping does not
+    know are kept as they are, so that no run is mislabelled.
+
+    Examples:
+        >>> method_label("her/paper"), method_label("cebp_initial/paper-per_worker")
+        ('HER', 'CEBP (Initial commit)')
+        >>> method_label("cebp_initial/paper-per_worker-beta0")
+        'CEBP (Initial commit), no IS weights'
+        >>> method_label("cebp/paper-wnorm")
+        'CEBP (paper form), merged buffer, normalised loss (superseded)'
+        >>> method_label("cper/paper-per_worker-her_past"), method_label("cper/paper-per_worker")
+        ('CPER', "CPER, 'future' HER draw (superseded)")
+        >>> method_label("mep/quick-bf16")
+        'MEP, quick preset, bf16'
+    """
+    sampler, _, variant = label.partition("/")
+    preset, *parts = variant.split("-") if variant else ("",)
+    qualifiers = [] if preset in ("", PAPER_PRESET) else [f"{preset} preset"]
+    if preset == PAPER_PRESET and sampler != "her" and "per_worker" not in parts:
+        qualifiers.append("merged buffer")
+    published = PUBLISHED_VARIANT_PARTS.get(sampler)
+    if published is not None and published not in parts:
+        qualifiers.append("'future' HER draw")
+    qualifiers += [VARIANT_NAMES.get(part, part) for part in parts if part not in ("per_worker", published)]
+    superseded = " (superseded)" if any(q in SUPERSEDED for q in qualifiers) else ""
+    return ", ".join([sampler_name(sampler), *qualifiers]) + superseded
+
+
+def method_order(label: str) -> tuple[int, str]:
+    """Sort key of configuration labels: the order of :data:`SAMPLER_NAMES` (HER first), then the folder."""
+    samplers = list(SAMPLER_NAMES)
+    sampler = sampler_of(label)
+    return (samplers.index(sampler) if sampler in samplers else len(samplers), label)
+
+
+def panel_title(panel: str) -> str:
+    """A task folder ``<task>-<goal_space>[-<robot>][-T<steps>]...`` in words; parts it does not know stay as they are.
+
+    Examples:
+        >>> panel_title("push-extended-joint-tableblind")
+        'Push: extended goals, joint control, table-blind pads'
+        >>> panel_title("slide-standard-T70"), panel_title("learning")
+        ('Slide: standard goals, 70-step episodes', 'learning')
+    """
+    task, *parts = panel.split("-")
+    if task not in TASK_NAMES:
+        return panel
+    words = [
+        f"{part[1:]}-step episodes" if re.fullmatch(r"T\d+", part) else PANEL_PART_NAMES.get(part, part)
+        for part in parts
     ]
-    short = {label: "/".join(p for i, p in enumerate(parts) if i not in shared) for label, parts in zip(labels, split)}
-    title = f"{panel} ({'/'.join(split[0][i] for i in shared)})" if shared else panel
-    return title, short
+    return TASK_NAMES[task] + (": " + ", ".join(words) if words else "")
 
 
 def padded(curves: list[np.ndarray]) -> np.ndarray:
@@ -162,7 +254,9 @@ def seed_count(n: int) -> str:
 
 
 REFERENCE_MARKERS = ("X", "*", "D", "P", "s", "^")
-VARIANT_LINESTYLES = ("-", "--", ":", "-.")
+VARIANT_LINESTYLES = ("-", "--", "-.")
+TAIL_LINESTYLE = ":"  # reserved for the epochs only some seeds reached
+LEGEND_WIDTH = 55  # characters of a legend line, so that a legend stays as wide as its 5-inch panel
 
 
 def sampler_of(label: str) -> str:
@@ -176,33 +270,61 @@ def sampler_of(label: str) -> str:
 
 
 def sampler_colours(samplers: Collection[str]) -> dict[str, str]:
-    """One colour of matplotlib's cycle per sampler, in sorted order, so that a sampler keeps it in every panel.
+    """One colour of matplotlib's cycle per sampler, fixed by :data:`SAMPLER_NAMES`' order (other samplers, sorted,
+    after them), so that a method keeps its colour in every panel and every figure.
 
     Examples:
         >>> colours = sampler_colours({"her", "cebp"})
-        >>> colours["cebp"] != colours["her"]
-        True
+        >>> colours["cebp"] != colours["her"], colours["her"] == sampler_colours({"her", "per"})["her"]
+        (True, True)
     """
     palette = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    return {sampler: palette[i % len(palette)] for i, sampler in enumerate(sorted(samplers))}
+    order = [*SAMPLER_NAMES, *sorted(set(samplers) - set(SAMPLER_NAMES))]
+    return {sampler: palette[order.index(sampler) % len(palette)] for sampler in samplers}
 
 
 def variant_linestyles(labels: Collection[str]) -> dict[str, str]:
-    """A line style per configuration label ``<sampler>/<variant>``: a sampler's variants, sorted, take
-    ``VARIANT_LINESTYLES`` in turn, so that one sampler's curves differ in style where they share a colour
-    (a fifth variant repeats the first's style).
+    """A line style per configuration label ``<sampler>/<variant>``: a sampler's variants take
+    ``VARIANT_LINESTYLES`` in turn, the method as the comparison runs it (its label the method's bare name) first,
+    so that one sampler's curves differ in style where they share a colour (a fourth variant repeats the first's
+    style). The dotted style is kept for tails that only some seeds reached.
 
     Examples:
-        >>> variant_linestyles(["her/paper", "cebp/paper", "cebp/paper-per_worker"])
-        {'cebp/paper': '-', 'cebp/paper-per_worker': '--', 'her/paper': '-'}
+        >>> variant_linestyles(["her/paper", "cebp_initial/paper-per_worker-wnorm", "cebp_initial/paper-per_worker"])
+        {'cebp_initial/paper-per_worker': '-', 'cebp_initial/paper-per_worker-wnorm': '--', 'her/paper': '-'}
     """
     by_sampler: dict[str, list[str]] = defaultdict(list)
-    for label in sorted(labels):
+    for label in sorted(labels, key=lambda label: (method_label(label) != sampler_name(sampler_of(label)), label)):
         by_sampler[sampler_of(label)].append(label)
-    return {
-        label: VARIANT_LINESTYLES[i % len(VARIANT_LINESTYLES)]
+    return dict(sorted(
+        (label, VARIANT_LINESTYLES[i % len(VARIANT_LINESTYLES)])
         for variants in by_sampler.values() for i, label in enumerate(variants)
+    ))
+
+
+def select_configurations(
+    groups: dict[str, dict[str, list]], patterns: Sequence[str] | None
+) -> dict[str, dict[str, list]]:
+    """``groups`` restricted to the configuration labels (``<sampler>/<variant>``) that match one of ``patterns``
+    (shell wildcards, e.g. ``her/*``); panels left without a configuration are dropped. ``None`` keeps all.
+
+    Examples:
+        >>> groups = {"push-standard": {"her/paper": [], "cebp/paper-wnorm": []}, "slide-standard": {"cebp/paper": []}}
+        >>> select_configurations(groups, ["her/*"])
+        {'push-standard': {'her/paper': []}}
+    """
+    if patterns is None:
+        return groups
+    labels = {label for curves_by_label in groups.values() for label in curves_by_label}
+    unmatched = [pattern for pattern in patterns if not fnmatch.filter(labels, pattern)]
+    if unmatched:
+        raise KeyError(f"no configuration matches {unmatched}; the configurations: {sorted(labels)}")
+    kept = {
+        panel: {label: curves for label, curves in curves_by_label.items()
+                if any(fnmatch.fnmatchcase(label, pattern) for pattern in patterns)}
+        for panel, curves_by_label in groups.items()
     }
+    return {panel: curves_by_label for panel, curves_by_label in kept.items() if curves_by_label}
 
 
 def select_panels(
@@ -242,6 +364,20 @@ def read_reference(path: str | Path) -> dict[str, dict[str, list[tuple[int, floa
     return {panel: dict(curves) for panel, curves in reference.items()}
 
 
+def caption(metric: str, reference_source: str | None) -> str:
+    """What a figure's lines, bands, dotted tails and markers are, printed under it.
+
+    Examples:
+        >>> print(caption("test_success", "the paper's Fig. 2"))
+        Lines: IQM of test success over the seeds the legend names; bands: 95% stratified-bootstrap CI; dotted: epochs that only some seeds reached. Markers: read off the paper's Fig. 2; its values past our last epoch are noted in the panel.
+    """
+    text = (f"Lines: IQM of {metric.replace('_', ' ')} over the seeds the legend names; bands: 95% stratified-bootstrap"
+            " CI; dotted: epochs that only some seeds reached.")
+    if reference_source is not None:
+        text += f" Markers: read off {reference_source}; its values past our last epoch are noted in the panel."
+    return text
+
+
 def draw_sweep(
     root: str | Path,
     metric: str = "test_success",
@@ -249,31 +385,53 @@ def draw_sweep(
     log_y: bool = False,
     panels: Sequence[str] | None = None,
     reference: str | Path | None = None,
+    configurations: Sequence[str] | None = None,
+    reference_panel: str | None = None,
+    reference_source: str = "the paper's Fig. 2",
 ) -> plt.Figure:
-    """One panel per task, one IQM line and 95% bootstrap band per configuration.
+    """One panel per task, one IQM line and 95% bootstrap band per configuration, named by its method
+    (:func:`method_label`), with a caption (:func:`caption`) under the figure.
 
-    The legend names how many seeds each stretch of a curve averages, so a tail that only some
-    seeds reached does not read as all of them.
+    A curve is solid with its band over the epochs all its seeds reached, and dotted, without a band, over those
+    only some reached; the legend names how many seeds each stretch averages.
 
-    A sampler keeps its colour in every panel, and a published curve takes its sampler's colour; a
-    sampler's variants in one panel (e.g. ``paper`` and ``paper-per_worker``) differ by line style.
+    A sampler keeps its colour in every panel and figure, and a published curve takes its sampler's colour; a
+    sampler's variants in one panel (e.g. ``paper-per_worker`` and ``paper-per_worker-wnorm``) differ by line style.
     A metric whose values all lie in [0, 1] (a success rate, a fraction) is drawn on one shared scale, so
     that a task still near zero looks it.
-    ``title`` names the figure; with a single panel it replaces the panel's own title (its folder name),
-    which is what a sweep root without a ``<task>-<goal_space>`` level (e.g. ``runs/learning``) needs.
+    ``title`` names the figure; with a single panel it replaces the panel's own title (its task in words,
+    :func:`panel_title`), which is what a sweep root without a ``<task>-<goal_space>`` level (e.g.
+    ``runs/learning``) needs.
     ``log_y`` draws the metric on a log scale, for one that spans decades (IS weights, the effective
     fraction of the buffer drawn from).
-    ``panels`` keeps those task folders only, in that order. ``reference`` (see :func:`read_reference`)
-    adds published values as markers, in the colour of the sampler they belong to; a panel in ``panels``
-    with published values but no runs yet is drawn with the markers alone.
+    ``panels`` keeps those task folders only, in that order; ``configurations`` keeps the configuration labels that
+    match one of its shell patterns (:func:`select_configurations`). ``reference`` (see :func:`read_reference`)
+    adds published values as markers, in the colour of the sampler they belong to, from ``reference_source``; a
+    panel in ``panels`` with published values but no runs yet is drawn with the markers alone.
+    With ``configurations``, only the published curves of the samplers drawn are marked.
+    ``reference_panel`` marks every panel with that panel's published values (the paper's Push curves on each
+    robot's Push). The x axis ends at the panel's last epoch: published values past it are listed in the panel,
+    not drawn, so that they do not squeeze our curves.
     """
     root = Path(root)
-    groups = collect_sweep(root, metric)
+    groups = select_configurations(collect_sweep(root, metric), configurations)
     if not groups:
         raise FileNotFoundError(f"no {CSV_NAME} under {root}")
     published = read_reference(reference) if reference is not None else {}
+    # A published curve keeps its marker in every panel and figure drawn from one reference.
+    marker_of = {key: REFERENCE_MARKERS[i % len(REFERENCE_MARKERS)]
+                 for i, key in enumerate(sorted({key for curves in published.values() for key in curves}))}
+    if reference_panel is not None:
+        if reference_panel not in published:
+            raise KeyError(
+                f"reference_panel={reference_panel!r} has no published values; those with: {sorted(published)}"
+            )
+        published = {panel: published[reference_panel] for panel in (panels or groups)}
+    if configurations is not None:  # published curves of the methods drawn only
+        drawn = {sampler_of(label) for curves_by_label in groups.values() for label in curves_by_label}
+        published = {panel: {key: points for key, points in curves.items() if sampler_of(key) in drawn}
+                     for panel, curves in published.items()}
     groups = select_panels(groups, panels, root, may_be_empty=published)
-    panels = {panel: short_labels(panel, sorted(curves_by_label)) for panel, curves_by_label in groups.items()}
     sampler_colour = sampler_colours(
         {sampler_of(label) for panel, curves_by_label in groups.items()
          for label in [*curves_by_label, *published.get(panel, {})]}
@@ -281,31 +439,49 @@ def draw_sweep(
     values = np.concatenate([c for curves_by_label in groups.values() for cs in curves_by_label.values() for c in cs])
     fraction = bool(np.all((values >= 0) & (values <= 1)))
     # Legends sit below their panels, so that neither curves nor markers hide behind them.
-    entries = max(len(curves) + len(published.get(panel, {})) for panel, curves in groups.items())
-    fig, axes = plt.subplots(
-        1, len(groups), figsize=(5 * len(groups), 3.8 + 0.17 * entries), squeeze=False, sharey=fraction
+    entries = max(  # legend lines: a long label (its seed counts ~25 characters) wraps
+        sum(1 + (len(method_label(label)) + 25) // LEGEND_WIDTH for label in curves) + len(published.get(panel, {}))
+        for panel, curves in groups.items()
     )
+    width, height = 5 * len(groups), 3.8 + 0.17 * entries
+    caption_lines = textwrap.wrap(caption(metric, reference_source if published else None), int(width * 15))
+    caption_height = 0.16 * len(caption_lines) + 0.1
+    fig, axes = plt.subplots(1, len(groups), figsize=(width, height + caption_height), squeeze=False, sharey=fraction)
     for ax, (panel, curves_by_label) in zip(axes[0], groups.items()):
-        panel_title, short = panels[panel]
         linestyle = variant_linestyles(curves_by_label)
-        for label, curves in sorted(curves_by_label.items()):
+        for label, curves in sorted(curves_by_label.items(), key=lambda item: method_order(item[0])):
             mean, low, high, seeds = iqm_band(curves)
+            complete = min(len(curve) for curve in curves)
             epochs = np.arange(1, len(mean) + 1)
             colour = sampler_colour[sampler_of(label)]
-            ax.plot(epochs, mean, color=colour, linestyle=linestyle[label],
-                    label=f"{short[label]} ({seed_coverage(seeds)})")
-            ax.fill_between(epochs, low, high, color=colour, alpha=0.2)
+            ax.plot(epochs[:complete], mean[:complete], color=colour, linestyle=linestyle[label],
+                    label=textwrap.fill(f"{method_label(label)} ({seed_coverage(seeds)})", LEGEND_WIDTH))
+            ax.fill_between(epochs[:complete], low[:complete], high[:complete], color=colour, alpha=0.2)
+            if complete < len(mean):
+                ax.plot(epochs[complete - 1:], mean[complete - 1:], color=colour, linestyle=TAIL_LINESTYLE,
+                        linewidth=1.2)
+        horizon = max(
+            (len(curve) for curves in curves_by_label.values() for curve in curves),
+            default=max((epoch for points in published.get(panel, {}).values() for epoch, _ in points), default=1),
+        )
         if not curves_by_label:
             ax.text(0.5, 0.5, "no runs yet", transform=ax.transAxes, ha="center", va="center", color="grey")
-        for marker, (key, points) in zip(REFERENCE_MARKERS, sorted(published.get(panel, {}).items())):
+        past_horizon = []
+        for key, points in sorted(published.get(panel, {}).items()):
             sampler, _, name = key.partition("/")
-            epochs, values = zip(*points)
-            ax.plot(epochs, values, linestyle="none", marker=marker, markersize=8, markeredgecolor="black",
-                    color=sampler_colour[sampler], label=name)
-        ax.set_title(textwrap.fill(title if title is not None and len(groups) == 1 else panel_title, 50))
+            shown = [(epoch, value) for epoch, value in points if epoch <= horizon]
+            past_horizon += [f"{name} {value:.2f} at epoch {epoch}" for epoch, value in points if epoch > horizon]
+            if shown:
+                epochs, values = zip(*shown)
+                ax.plot(epochs, values, linestyle="none", marker=marker_of[key], markersize=8, markeredgecolor="black",
+                        color=sampler_colour[sampler], label=name)
+        if past_horizon:
+            ax.text(0.02, 0.98, "Past this axis:\n" + "\n".join(past_horizon), transform=ax.transAxes, ha="left",
+                    va="top", fontsize=7, bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "grey"})
+        ax.set_title(textwrap.fill(title if title is not None and len(groups) == 1 else panel_title(panel), 50))
         if log_y:
             ax.set_yscale("log")
-        ax.set_xlim(left=0)
+        ax.set_xlim(0, horizon + 0.5)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epochs trained")
         ax.set_ylabel(f"{metric.replace('_', ' ')} (IQM, 95% CI)")
@@ -316,7 +492,8 @@ def draw_sweep(
         ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 0), borderaxespad=5)
     if title is not None and len(groups) > 1:
         fig.suptitle(title)
-    fig.tight_layout()
+    fig.text(0.5, 0.01, "\n".join(caption_lines), ha="center", va="bottom", fontsize=8)
+    fig.tight_layout(rect=(0, caption_height / (height + caption_height), 1, 1))
     return fig
 
 
@@ -328,9 +505,11 @@ def plot_sweep(
     log_y: bool = False,
     panels: Sequence[str] | None = None,
     reference: str | Path | None = None,
+    configurations: Sequence[str] | None = None,
+    reference_panel: str | None = None,
 ) -> Path:
     """Draws the sweep (:func:`draw_sweep`) to a PNG, by default ``<root>/<metric>.png``; returns its path."""
-    fig = draw_sweep(root, metric, title, log_y, panels, reference)
+    fig = draw_sweep(root, metric, title, log_y, panels, reference, configurations, reference_panel)
     out = Path(out) if out is not None else Path(root) / f"{metric}.png"
     fig.savefig(out, dpi=120)
     plt.close(fig)
@@ -366,6 +545,11 @@ def improvement_cell(per_seed: list[float], baseline: list[float]) -> str:
     return f"{probability_of_improvement(per_seed, baseline):.2f} [{low:.2f}, {high:.2f}]"
 
 
+def epochs_phrase(n: int) -> str:
+    """``"after 1 epoch"``, ``"after 10 epochs"``: the epoch a table column reads."""
+    return f"after {n} epoch{'s' * (n > 1)}"
+
+
 def summary_table(
     root: str | Path,
     after_epochs: list[int],
@@ -374,31 +558,34 @@ def summary_table(
     improvement_at: int | Sequence[int] = (),
     baseline: str = "her",
     panels: Sequence[str] | None = None,
+    configurations: Sequence[str] | None = None,
 ) -> str:
-    """A Markdown table: per task and configuration, the IQM [95% bootstrap CI] of ``metric`` after each
-    of ``after_epochs`` epochs over the seeds that got there, and the runs' training hours.
+    """A Markdown table: per task and configuration (its method, :func:`method_label`, and its run folder), the
+    IQM [95% stratified-bootstrap CI] of ``metric`` after each of ``after_epochs`` epochs over the seeds that got
+    there, and the runs' training hours (the sum of their ``epoch_s``). Every column head says what its cells are.
 
     ``mean_over=(first, last)`` adds a column of each seed's mean over epochs ``first`` to ``last``
     (counted from 1, both included; seeds that reached ``last``), steadier than one epoch's value
     while success is still a few test episodes. ``improvement_at=n`` (or several) adds, per ``n``, the
     probability that a configuration's run beats a run of the panel's ``baseline`` configuration (the
     sampler folder of that name, e.g. ``her``; ``-`` in panels without it) after ``n`` epochs, with its
-    95% interval, over the seeds of either that reached epoch ``n``. ``panels`` keeps those task folders.
+    95% interval, over the seeds of either that reached epoch ``n``. ``panels`` keeps those task folders, and
+    ``configurations`` the configurations that match its shell patterns (:func:`select_configurations`).
 
     Examples:
         >>> import tempfile
         >>> with tempfile.TemporaryDirectory() as d:
         ...     for sampler, runs in (("her", [(0.1, 0.5), (0.3, 0.7), (0.2,)]), ("cebp", [(0.2, 0.9), (0.4, 0.8)])):
         ...         for seed, values in enumerate(runs):
-        ...             run = Path(d) / "push-extended" / sampler / "paper" / f"seed{seed}"
+        ...             run = Path(d) / "push-extended" / sampler / "paper-per_worker" / f"seed{seed}"
         ...             run.mkdir(parents=True)
         ...             rows = [f"{e},{v},1800" for e, v in enumerate(values)]
         ...             _ = (run / CSV_NAME).write_text("\\n".join(["epoch,test_success,epoch_s", *rows]) + "\\n")
         ...     print(summary_table(d, [1, 2], improvement_at=2))
-        | task | configuration | seeds | after 1 epoch | after 2 epochs | P(> her) after 2 epochs | training hours |
-        |---|---|---|---|---|---|---|
-        | push-extended (paper) | cebp | 2 | 0.30 [0.20, 0.40] | 0.85 [0.80, 0.90] | 1.00 [1.00, 1.00] | 2.0 |
-        | push-extended (paper) | her | 3 | 0.20 [0.10, 0.30] | 0.60 [0.50, 0.70] (2 seeds) | (baseline) | 2.5 |
+        | task | method | run folder | seeds | IQM [95% CI] after 1 epoch | IQM [95% CI] after 2 epochs | P(> HER) [95% CI] after 2 epochs | training hours |
+        |---|---|---|---|---|---|---|---|
+        | Push: extended goals | HER | her/paper-per_worker | 3 | 0.20 [0.10, 0.30] | 0.60 [0.50, 0.70] (2 seeds) | (baseline) | 2.5 |
+        | Push: extended goals | CEBP (paper form) | cebp/paper-per_worker | 2 | 0.30 [0.20, 0.40] | 0.85 [0.80, 0.90] | 1.00 [1.00, 1.00] | 2.0 |
     """
     if any(n < 1 for n in after_epochs):
         raise ValueError(f"after_epochs={after_epochs}: epoch counts start at 1")
@@ -408,15 +595,15 @@ def summary_table(
     if any(n < 1 for n in improvement_at):
         raise ValueError(f"improvement_at={improvement_at}: epoch counts start at 1")
     root = Path(root)
-    values = collect_sweep(root, metric)
+    values = select_configurations(collect_sweep(root, metric), configurations)
     if not values:
         raise FileNotFoundError(f"no {CSV_NAME} under {root}")
     values = select_panels(values, panels, root)
     epoch_seconds = collect_sweep(root, "epoch_s")
-    header = ["task", "configuration", "seeds", *(f"after {n} epoch{'s' * (n > 1)}" for n in after_epochs)]
+    header = ["task", "method", "run folder", "seeds", *(f"IQM [95% CI] {epochs_phrase(n)}" for n in after_epochs)]
     if mean_over is not None:
-        header.append(f"mean over epochs {mean_over[0]}-{mean_over[1]}")
-    header.extend(f"P(> {baseline}) after {n} epoch{'s' * (n > 1)}" for n in improvement_at)
+        header.append(f"IQM [95% CI] of each seed's mean over epochs {mean_over[0]}-{mean_over[1]}")
+    header.extend(f"P(> {sampler_name(baseline)}) [95% CI] {epochs_phrase(n)}" for n in improvement_at)
     header.append("training hours")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
 
@@ -424,10 +611,9 @@ def summary_table(
         return [curve[n - 1] for curve in curves if len(curve) >= n]
 
     for panel, curves_by_label in values.items():
-        title, short = short_labels(panel, sorted(curves_by_label))
         baselines = [curves for label, curves in curves_by_label.items() if sampler_of(label) == baseline]
-        for label, curves in sorted(curves_by_label.items()):
-            cells = [title, short[label], str(len(curves))]
+        for label, curves in sorted(curves_by_label.items(), key=lambda item: method_order(item[0])):
+            cells = [panel_title(panel), method_label(label), label, str(len(curves))]
             for n in after_epochs:
                 cells.append(iqm_cell(at_epoch(curves, n), len(curves)))
             if mean_over is not None:
@@ -454,11 +640,13 @@ def panel_tables(
     improvement_at: Sequence[int] = (),
     baseline: str = "her",
     panels: Sequence[str] | None = None,
+    configurations: Sequence[str] | None = None,
 ) -> str:
     """One :func:`summary_table` per panel (task folder), under a heading of its own, each with those of
     ``after_epochs`` and ``improvement_at`` that some run of the panel reached, and ``mean_over`` where one
     reached its last epoch: a task trained for 12 epochs gets no empty column for 20. ``panels`` keeps
-    those task folders, in that order (default: all, sorted).
+    those task folders, in that order (default: all, sorted), and ``configurations`` the configurations that match
+    its shell patterns.
 
     Examples:
         >>> import tempfile
@@ -469,19 +657,19 @@ def panel_tables(
         ...         rows = [f"{e},0.5,60" for e in range(epochs)]
         ...         _ = (run / CSV_NAME).write_text("\\n".join(["epoch,test_success,epoch_s", *rows]) + "\\n")
         ...     print(panel_tables(d, [2, 3]))
-        ### push-standard
+        ### Push: standard goals (push-standard)
         <BLANKLINE>
-        | task | configuration | seeds | after 2 epochs | training hours |
-        |---|---|---|---|---|
-        | push-standard | her/paper | 1 | 0.50 [0.50, 0.50] | 0.0 |
-        <BLANKLINE>
-        ### slide-standard
-        <BLANKLINE>
-        | task | configuration | seeds | after 2 epochs | after 3 epochs | training hours |
+        | task | method | run folder | seeds | IQM [95% CI] after 2 epochs | training hours |
         |---|---|---|---|---|---|
-        | slide-standard | her/paper | 1 | 0.50 [0.50, 0.50] | 0.50 [0.50, 0.50] | 0.1 |
+        | Push: standard goals | HER | her/paper | 1 | 0.50 [0.50, 0.50] | 0.0 |
+        <BLANKLINE>
+        ### Slide: standard goals (slide-standard)
+        <BLANKLINE>
+        | task | method | run folder | seeds | IQM [95% CI] after 2 epochs | IQM [95% CI] after 3 epochs | training hours |
+        |---|---|---|---|---|---|---|
+        | Slide: standard goals | HER | her/paper | 1 | 0.50 [0.50, 0.50] | 0.50 [0.50, 0.50] | 0.1 |
     """
-    curves = select_panels(collect_sweep(Path(root), metric), panels, Path(root))
+    curves = select_panels(select_configurations(collect_sweep(Path(root), metric), configurations), panels, Path(root))
     sections = []
     for panel, curves_by_label in curves.items():
         longest = max(len(curve) for seeds in curves_by_label.values() for curve in seeds)
@@ -489,8 +677,9 @@ def panel_tables(
             root, [n for n in after_epochs if n <= longest], metric,
             mean_over=mean_over if mean_over is not None and mean_over[1] <= longest else None,
             improvement_at=[n for n in improvement_at if n <= longest], baseline=baseline, panels=[panel],
+            configurations=configurations,
         )
-        sections.append(f"### {panel}\n\n{table}")
+        sections.append(f"### {panel_title(panel)} ({panel})\n\n{table}")
     return "\n\n".join(sections)
 
 
@@ -501,11 +690,18 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("root", help="sweep folder (e.g. runs/ or multirun/...)")
     parser.add_argument("--out", help="PNG path (default: <root>/<metric>.png)")
     parser.add_argument("--metric", default="test_success", help="CSV column to plot")
-    parser.add_argument("--title", help="figure title (default: each panel is titled with its task folder)")
+    parser.add_argument("--title", help="figure title (default: each panel is titled with its task)")
     parser.add_argument("--log-y", action="store_true", help="a log scale for a metric that spans decades")
     parser.add_argument("--panels", nargs="+", metavar="TASK_FOLDER", help="draw these task folders only, in this order")
     parser.add_argument(
+        "--configurations", nargs="+", metavar="PATTERN",
+        help="keep the configurations <sampler>/<variant> that match one of these shell patterns (e.g. 'her/*')",
+    )
+    parser.add_argument(
         "--reference", metavar="CSV", help="published values to mark (columns panel,sampler,name,epoch,value)"
+    )
+    parser.add_argument(
+        "--reference-panel", metavar="TASK_FOLDER", help="with --reference: mark every panel with this panel's values"
     )
     parser.add_argument(
         "--table", nargs="+", type=int, metavar="N", help="also print a Markdown table of the metric after N epochs"
@@ -529,16 +725,21 @@ def main(argv: list[str] | None = None) -> None:
     ):
         if value and not args.table:
             parser.error(f"{option} goes with --table: give --table too")
-    print(f"wrote {plot_sweep(args.root, args.out, args.metric, args.title, args.log_y, args.panels, args.reference)}")
+    if args.reference_panel and not args.reference:
+        parser.error("--reference-panel goes with --reference: give --reference too")
+    out = plot_sweep(args.root, args.out, args.metric, args.title, args.log_y, args.panels, args.reference,
+                     args.configurations, args.reference_panel)
+    print(f"wrote {out}")
     if args.table:
         # The figure has refused any panel without runs that the reference does not name; those left have no rows.
-        with_runs = collect_sweep(Path(args.root), args.metric)
+        with_runs = select_configurations(collect_sweep(Path(args.root), args.metric), args.configurations)
         panels = None if args.panels is None else [panel for panel in args.panels if panel in with_runs]
         print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline,
-                            panels))
+                            panels, args.configurations))
         if args.tables_out:
             tables = panel_tables(
-                args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline, panels
+                args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline, panels,
+                args.configurations,
             )
             Path(args.tables_out).write_text(tables + "\n")
             print(f"wrote {args.tables_out}")
