@@ -25,6 +25,17 @@ class HERExploration(TensorDictModuleBase):
     restarts the generator from the seed and that call's observations. Each worker of a
     multi-process collector (its envs seeded apart) thereby gets its own stream.
 
+    Args:
+        random_eps (float, optional): probability of a uniform random action. Defaults to ``0.3``.
+        noise_std (float, optional): standard deviation of the Gaussian noise. Defaults to ``0.2``.
+        low (float, optional): the action's lower bound. Defaults to ``-1.0``.
+        high (float, optional): the action's upper bound. Defaults to ``1.0``.
+        action_key (str, optional): the action read and overwritten. Defaults to ``"action"``.
+        observation_key (str, optional): the observation that tells workers apart after a
+            :meth:`reseed`. Defaults to ``"observation"``.
+        generator (torch.Generator, optional): the noise's generator; ``None`` draws from torch's global
+            one until the first :meth:`reseed`. Defaults to ``None``.
+
     Examples:
         >>> from tensordict import TensorDict
         >>> from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -68,7 +79,14 @@ class HERExploration(TensorDictModuleBase):
         self._applied_reseeds = 0
 
     def reseed(self, seed: int) -> None:
-        """Restarts the noise stream from ``seed`` at the next call (here, or in a worker after a weight sync)."""
+        """Restarts the noise stream from ``seed`` at the next call (here, or in a worker after a weight sync).
+
+        Args:
+            seed (int): a non-negative seed.
+
+        Raises:
+            ValueError: a negative seed.
+        """
         if seed < 0:
             raise ValueError(f"seed must be non-negative, got {seed}")
         self.noise_seed[0] = seed
@@ -87,6 +105,11 @@ class HERExploration(TensorDictModuleBase):
         self.generator.manual_seed(int(np.random.SeedSequence(mixed).generate_state(1)[0]))
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
+        """Perturbs ``td``'s action in place under the random exploration type; otherwise returns ``td`` unchanged.
+
+        Args:
+            td (TensorDictBase): holds the policy's action.
+        """
         if exploration_type() not in (ExplorationType.RANDOM, None):
             return td
         self._restart_if_reseeded(td)

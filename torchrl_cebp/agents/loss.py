@@ -15,6 +15,11 @@ class ClippedTD0Estimator(TD0Estimator):
     With rewards in ``{-1, 0}`` every return lies in ``[-1/(1-gamma), 0]``; clipping the
     bootstrapped target to that range keeps early, wild target estimates from feeding back.
 
+    Args:
+        low (float): the target's lower bound (keyword only).
+        high (float): the target's upper bound (keyword only).
+        **kwargs: passed to :class:`~torchrl.objectives.value.TD0Estimator` (``gamma``, ``value_network``, ...).
+
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
@@ -33,6 +38,13 @@ class ClippedTD0Estimator(TD0Estimator):
         self.high = high
 
     def value_estimate(self, tensordict: TensorDictBase, *args, **kwargs) -> torch.Tensor:
+        """:class:`~torchrl.objectives.value.TD0Estimator`'s target, clipped to ``[low, high]``.
+
+        Args:
+            tensordict (TensorDictBase): the batch, with its ``"next"`` entries.
+            *args: passed to ``TD0Estimator.value_estimate``.
+            **kwargs: passed to ``TD0Estimator.value_estimate``.
+        """
         return super().value_estimate(tensordict, *args, **kwargs).clamp(self.low, self.high)
 
 
@@ -50,6 +62,12 @@ class HERDDPGLoss(DDPGLoss):
 
     ``"td_error"`` is written into the input batch for prioritised samplers as ``|Q - target|``,
     baselines' PER priority before ``eps`` and ``alpha`` (TorchRL's DDPGLoss writes the square).
+
+    Args:
+        actor_network (TensorDictModule): the policy, e.g. :func:`~torchrl_cebp.agents.make_actor`.
+        value_network (TensorDictModule): the Q-network, e.g. :func:`~torchrl_cebp.agents.make_critic`.
+        gamma (float): the discount (keyword only); the critic target is clipped to ``[-1/(1-gamma), 0]``.
+        action_l2 (float, optional): weight of the actor's action penalty (keyword only). Defaults to ``1.0``.
 
     Examples:
         >>> from tensordict import TensorDict
@@ -90,6 +108,14 @@ class HERDDPGLoss(DDPGLoss):
         )
 
     def loss_value(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict]:
+        """The critic's loss, ``mean(w * delta^2)``; writes ``|delta|`` into ``tensordict`` as the priority.
+
+        Args:
+            tensordict (TensorDictBase): the batch, with the normalised inputs at root and ``"next"``.
+
+        Returns:
+            the loss and DDPGLoss's metadata, with ``"td_error"``.
+        """
         loss, metadata = super().loss_value(tensordict)
         weights = tensordict.get(self.tensor_keys.priority_weight, None)
         if weights is not None and self.use_prioritized_weights in (True, "auto") and self.reduction == "mean":
@@ -102,6 +128,14 @@ class HERDDPGLoss(DDPGLoss):
         return loss, {**metadata, "td_error": abs_error}
 
     def loss_actor(self, tensordict: TensorDictBase) -> tuple[torch.Tensor, dict]:
+        """The actor's loss, ``-mean Q(s, pi(s)) + action_l2 * mean(pi(s)^2)``, unweighted.
+
+        Args:
+            tensordict (TensorDictBase): the batch.
+
+        Returns:
+            the loss and ``{"action_l2": mean(pi(s)^2)}``.
+        """
         td = tensordict.select(*self.actor_in_keys, *self.value_exclusive_keys, strict=False).detach()
         with self.actor_network_params.to_module(self.actor_network, preserve_module_state=False):
             td = self.actor_network(td)

@@ -14,6 +14,12 @@ def make_actor(
 ) -> TensorDictModule:
     """A deterministic tanh policy reading ``in_key`` and writing ``"action"`` in ``[-1, 1]``.
 
+    Args:
+        input_dim (int): the input's size (observation + goal).
+        action_dim (int): the action's size.
+        hidden (sequence of int, optional): the hidden layers' widths (ReLU). Defaults to ``(256, 256, 256)``.
+        in_key (str, optional): the input's key (keyword only). Defaults to ``"agent_input"``.
+
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
@@ -32,6 +38,12 @@ def make_critic(
     input_dim: int, action_dim: int, hidden: Sequence[int] = (256, 256, 256), *, in_key: str = "agent_input"
 ) -> ValueOperator:
     """A Q-network reading ``in_key`` and ``"action"``, writing ``"state_action_value"`` [..., 1].
+
+    Args:
+        input_dim (int): the input's size (observation + goal).
+        action_dim (int): the action's size.
+        hidden (sequence of int, optional): the hidden layers' widths (ReLU). Defaults to ``(256, 256, 256)``.
+        in_key (str, optional): the input's key (keyword only). Defaults to ``"agent_input"``.
 
     Examples:
         >>> import torch

@@ -16,9 +16,9 @@ class RunningNormalizer(nn.Module):
     split into updates. The standard deviation is floored at ``eps``.
 
     Args:
-        size: the size of the last dimension of the inputs.
-        eps: the smallest standard deviation used.
-        clip: the normalised values are clipped to ``[-clip, clip]``.
+        size (int): the size of the last dimension of the inputs.
+        eps (float, optional): the smallest standard deviation used. Defaults to ``0.01``.
+        clip (float, optional): the normalised values are clipped to ``[-clip, clip]``. Defaults to ``5.0``.
 
     Examples:
         >>> norm = RunningNormalizer(2)
@@ -42,7 +42,11 @@ class RunningNormalizer(nn.Module):
 
     @torch.no_grad()
     def update(self, x: torch.Tensor) -> None:
-        """Adds the rows of ``x`` (any leading shape) to the statistics."""
+        """Adds the rows of ``x`` to the statistics.
+
+        Args:
+            x (torch.Tensor): ``[..., size]``, any leading shape.
+        """
         x = x.reshape(-1, self.sum.shape[-1]).to(self.sum)
         self.sum += x.sum(0)
         self.sumsq += x.square().sum(0)
@@ -53,6 +57,11 @@ class RunningNormalizer(nn.Module):
         self.std.copy_(var.clamp_min(self.eps**2).sqrt())
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``x`` normalised by the current statistics and clipped.
+
+        Args:
+            x (torch.Tensor): ``[..., size]``.
+        """
         return ((x - self.mean) / self.std).clamp(-self.clip, self.clip)
 
 
@@ -66,11 +75,16 @@ class ObsGoalNormalizer(TensorDictModuleBase):
     always see the current ones, as in baselines.
 
     Args:
-        obs_dim: the observation size.
-        goal_dim: the goal size.
-        eps, clip: see :class:`RunningNormalizer`.
-        raw_clip: the raw values are clipped to ``[-raw_clip, raw_clip]`` first.
-        out_key: where the concatenated, normalised input is written.
+        obs_dim (int): the observation size.
+        goal_dim (int): the goal size.
+        eps (float, optional): see :class:`RunningNormalizer` (keyword only). Defaults to ``0.01``.
+        clip (float, optional): see :class:`RunningNormalizer` (keyword only). Defaults to ``5.0``.
+        raw_clip (float, optional): the raw values are clipped to ``[-raw_clip, raw_clip]`` first
+            (keyword only). Defaults to ``200.0``.
+        obs_key (str, optional): the observation's key (keyword only). Defaults to ``"observation"``.
+        goal_key (str, optional): the goal's key (keyword only). Defaults to ``"desired_goal"``.
+        out_key (str, optional): where the concatenated, normalised input is written (keyword only).
+            Defaults to ``"agent_input"``.
 
     Examples:
         >>> from tensordict import TensorDict
@@ -108,12 +122,21 @@ class ObsGoalNormalizer(TensorDictModuleBase):
         )
 
     def update(self, td: TensorDictBase) -> None:
-        """Adds the observations and goals of ``td`` to the statistics."""
+        """Adds the observations and goals of ``td`` to the statistics.
+
+        Args:
+            td (TensorDictBase): holds the observation and goal keys, any batch size.
+        """
         obs, goal = self._raw(td)
         self.obs.update(obs)
         self.goal.update(goal)
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
+        """Writes the normalised ``[observation, goal]`` into ``td`` at ``out_key``.
+
+        Args:
+            td (TensorDictBase): holds the observation and goal keys.
+        """
         obs, goal = self._raw(td)
         td.set(self.out_keys[0], torch.cat([self.obs(obs), self.goal(goal)], -1))
         return td

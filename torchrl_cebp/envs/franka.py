@@ -5,9 +5,9 @@ gymnasium-robotics (``kitchen_franka/franka_assets``): the arm is moved by a moc
 hand (its joint actuators are removed), the fingers keep their position actuators, a red cube stands
 on a table, and a touch sensor covers each finger's inner pad. Sites, joints and the observation
 follow gymnasium-robotics' Fetch naming, so Fetch's observation (25), goal layout (3) and 4-D action
-(``dx, dy, dz`` scaled by 0.05, gripper) are reused unchanged (paper's Sim2Real section;
-ORIGINAL_CODE.md §7 for the goal space: 100-step episodes, goal = table centre +- 0.1, in the air with
-probability 0.5 at height U(0, 0.45), object = centre +- 0.1). Every move is clamped to the grip point's
+(``dx, dy, dz`` scaled by 0.05, gripper) are reused unchanged. The goal space is the one the paper's
+Sim2Real section describes (no code for it was published): 100-step episodes, goal = table centre +- 0.1,
+in the air with probability 0.5 at height U(0, 0.45), object = centre +- 0.1. Every move is clamped to the grip point's
 :class:`Workspace` box, as the Sim2Real loop clamps the real arm's.
 
 The robot frame is the world frame: the Panda base sits at the origin on the table top (``z = 0``).
@@ -78,6 +78,12 @@ class Workspace:
     joint stops at its limit and the weld swings the hand by centimetres every step. The simulator clamps every
     move to this box, and so does the Sim2Real loop on the real arm.
 
+    Args:
+        low (tuple of float, optional): the box's lower corner. Defaults to ``(0.3, -0.2, 0.01)``.
+        high (tuple of float, optional): the box's upper corner. Defaults to ``(0.65, 0.2, 0.48)``.
+        max_step (float, optional): the longest displacement per axis one step may command.
+            Defaults to ``0.05`` (an action of 1).
+
     Example:
         >>> ws = Workspace(low=(0.3, -0.2, 0.0), high=(0.7, 0.2, 0.5), max_step=0.05)
         >>> ws.clamp(np.array([0.69, 0.0, 0.2]), np.array([0.05, 0.0, 0.0])).round(3).tolist()
@@ -89,7 +95,12 @@ class Workspace:
     max_step: float = ACTION_SCALE
 
     def clamp(self, position: np.ndarray, delta: np.ndarray) -> np.ndarray:
-        """``delta`` limited to ``max_step`` per axis and so that ``position + delta`` stays in the box."""
+        """``delta`` limited to ``max_step`` per axis and so that ``position + delta`` stays in the box.
+
+        Args:
+            position (np.ndarray): the grip point now.
+            delta (np.ndarray): the displacement asked for.
+        """
         delta = np.clip(delta, -self.max_step, self.max_step)
         return np.clip(position + delta, self.low, self.high) - position
 
@@ -97,6 +108,20 @@ class Workspace:
 @dataclass(frozen=True)
 class FrankaLayout:
     """Where things are in the Franka scene (robot frame, metres) and what counts as success.
+
+    Args:
+        table_centre (tuple of float, optional): the table's centre (x, y). Defaults to ``(0.5, 0.0)``.
+        table_half_size (tuple of float, optional): the table's half-size (x, y). Defaults to ``(0.35, 0.45)``.
+        table_height (float, optional): ``z`` of the table top. Defaults to ``0.0``.
+        cube_size (float, optional): the cube's edge. Defaults to ``0.05``.
+        obj_range (float, optional): the cube starts at the table centre +- this in x and y. Defaults to ``0.1``.
+        target_range (float, optional): goals lie at the table centre +- this in x and y. Defaults to ``0.1``.
+        target_height (float, optional): how high above the table a goal in the air may be. Defaults to ``0.45``.
+        distance_threshold (float, optional): the success radius. Defaults to ``0.05``.
+        max_episode_steps (int, optional): the episode length. Defaults to ``100``.
+        gripper_start_height (float, optional): height of the grip point above the cube centre at the start
+            of an episode. Defaults to ``0.2``.
+        workspace (Workspace, optional): the box every move is clamped to. Defaults to ``Workspace()``.
 
     Example:
         >>> FrankaLayout().cube_centre_height
@@ -112,7 +137,6 @@ class FrankaLayout:
     target_height: float = 0.45
     distance_threshold: float = 0.05
     max_episode_steps: int = 100
-    # Height of the grip point above the cube centre at the start of an episode.
     gripper_start_height: float = 0.2
     workspace: Workspace = Workspace()
 
@@ -124,6 +148,13 @@ class FrankaLayout:
 
 def sample_goal(layout: FrankaLayout, rng: np.random.Generator) -> np.ndarray:
     """A goal: table centre +- ``target_range`` in x/y, on the table or, with probability 0.5, up to ``target_height`` above.
+
+    Args:
+        layout (FrankaLayout): the scene.
+        rng (np.random.Generator): draws the goal.
+
+    Returns:
+        the goal ``[x, y, z]``.
 
     Example:
         >>> goal = sample_goal(FrankaLayout(), np.random.default_rng(0))
@@ -140,6 +171,12 @@ def sample_goal(layout: FrankaLayout, rng: np.random.Generator) -> np.ndarray:
 
 def franka_spec(layout: FrankaLayout = FrankaLayout()) -> mujoco.MjSpec:
     """The Franka pick-and-place scene: Panda (mocap-driven), table, red cube, target site, finger touch sensors.
+
+    Args:
+        layout (FrankaLayout, optional): the scene's geometry. Defaults to ``FrankaLayout()``.
+
+    Returns:
+        the uncompiled ``mujoco.MjSpec``.
 
     Example:
         >>> model = franka_spec().compile()
@@ -232,10 +269,15 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
     It is for training episodes only; tests and the Sim2Real loop start from the table.
 
     Args:
-        layout: scene geometry and goal space.
-        grasped_start: probability that a reset starts with the cube grasped (default 0: never).
-        scene_hook: called with the ``MjSpec`` before it is compiled, to add things (markers, cameras).
+        layout (FrankaLayout, optional): scene geometry and goal space. Defaults to ``FrankaLayout()``.
+        scene_hook (callable, optional): called with the ``MjSpec`` before it is compiled, to add things
+            (markers, cameras). Defaults to ``None``.
+        grasped_start (float, optional): probability that a reset starts with the cube grasped.
+            Defaults to ``0.0`` (never).
         **kwargs: ``render_mode``, ``width``, ``height`` as for gymnasium-robotics envs.
+
+    Raises:
+        ValueError: ``grasped_start`` is not in ``[0, 1]``.
 
     Example:
         >>> env = FrankaPickPlaceEnv()
@@ -371,7 +413,13 @@ class FrankaPickPlaceEnv(TouchReporting, MujocoFetchEnv, EzPickle):
 def make_franka(goal_space: str = "standard", **kwargs: Any) -> FrankaPickPlaceEnv:
     """The (unwrapped) gymnasium Franka env; its one goal space is the paper's, called ``standard``.
 
-    ``max_episode_steps`` replaces the layout's episode length (100, the paper's), as it does for Fetch.
+    Args:
+        goal_space (str, optional): ``"standard"``, the only one. Defaults to ``"standard"``.
+        **kwargs: passed to :class:`FrankaPickPlaceEnv`; ``max_episode_steps`` replaces the layout's
+            episode length (100, the paper's), as it does for Fetch.
+
+    Raises:
+        ValueError: another goal space.
 
     Example:
         >>> make_franka().reset(seed=1)[0]["desired_goal"].shape

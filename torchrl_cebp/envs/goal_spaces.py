@@ -1,7 +1,8 @@
 """Goal-space settings of the touch-sensing Fetch tasks.
 
-``standard`` reproduces gymnasium-robotics' Fetch v4 defaults; ``extended`` is CPER's
-(Vulin et al.), the one the CEBP paper reports on.
+``standard`` reproduces gymnasium-robotics' Fetch v4 defaults: the goal space of the Initial commit,
+on which the paper's Fig. 2 was made. ``extended`` is CPER's (Vulin et al.): the one the paper's text
+describes and the released code uses.
 """
 
 from __future__ import annotations
@@ -16,6 +17,19 @@ GOAL_SPACES: tuple[str, ...] = ("standard", "extended")
 class GoalSpace:
     """Where objects start and targets appear, and when a task counts as solved.
 
+    Args:
+        target_offset (tuple of float): offset of the target region's centre from the gripper's start (x, y, z).
+        obj_range (float): half-width of the square the object starts in.
+        target_range (float): half-width of the square the target appears in.
+        distance_threshold (float, optional): the success radius. Defaults to ``0.05``.
+        max_episode_steps (int, optional): the episode length. Defaults to ``50``.
+        table_half_size (tuple of float, optional): the table's half-size (x, y); ``None`` keeps the XML's
+            table. Defaults to ``None``.
+        target_height (float, optional): if set, every target is lifted by ``U(0, target_height)``
+            (gymnasium lifts only half of them). Defaults to ``None``.
+        shift_object_x (bool, optional): start the object ``obj_range`` further from the robot (CPER's
+            Slide). Defaults to ``False``.
+
     Example:
         >>> from torchrl_cebp.envs.goal_spaces import get_goal_space
         >>> get_goal_space("slide", "extended").max_episode_steps
@@ -27,11 +41,8 @@ class GoalSpace:
     target_range: float
     distance_threshold: float = 0.05
     max_episode_steps: int = 50
-    # Table half-size (x, y); None keeps the XML's table.
     table_half_size: tuple[float, float] | None = None
-    # If set, every target is lifted by U(0, target_height) (gymnasium lifts only half of them).
     target_height: float | None = None
-    # CPER starts the Slide puck obj_range further from the robot.
     shift_object_x: bool = False
 
 
@@ -54,7 +65,14 @@ _GOAL_SPACES: dict[tuple[str, str], GoalSpace] = {
 
 
 def get_goal_space(task: str, goal_space_name: str) -> GoalSpace:
-    """The :class:`GoalSpace` of ``task`` under ``goal_space_name``; ValueError listing the valid names if unknown.
+    """The :class:`GoalSpace` of ``task`` under ``goal_space_name``.
+
+    Args:
+        task (str): ``"pick_place"``, ``"push"`` or ``"slide"``.
+        goal_space_name (str): ``"standard"`` or ``"extended"``.
+
+    Raises:
+        ValueError: an unknown task or goal space; the message lists the valid names.
 
     Example:
         >>> from torchrl_cebp.envs.goal_spaces import get_goal_space

@@ -1,4 +1,4 @@
-"""CPER's joint-position-controlled Fetch, the robot of the released CEBP code (ORIGINAL_CODE.md §3).
+"""CPER's joint-position-controlled Fetch: robot B, the robot of the released CEBP code.
 
 Built from gymnasium-robotics' shipped Fetch XML through ``mujoco.MjSpec``: the mocap weld is
 removed, the seven arm joints get ``position`` actuators (kp 300, CPER's control ranges) and, on
@@ -25,7 +25,19 @@ MOCAP_BODY = "robot0:mocap"
 
 @dataclass(frozen=True)
 class ArmJoint:
-    """One actuated arm joint: its control range, CPER's initial angle and the reset perturbation U(lo, hi)."""
+    """One actuated arm joint: its control range, CPER's initial angle and the reset perturbation U(lo, hi).
+
+    Args:
+        name (str): the joint's name in the Fetch XML.
+        ctrl_range (tuple of float): ``(low, high)`` of its position actuator.
+        initial (float): CPER's initial angle.
+        perturbation (tuple of float): ``(lo, hi)`` of the uniform offset added at every reset.
+
+    Example:
+        >>> joint = ArmJoint("robot0:elbow_flex_joint", (0.0, 2.0), 1.55, (-0.1, 0.0))
+        >>> joint.centre, joint.half_range
+        (1.0, 1.0)
+    """
 
     name: str
     ctrl_range: tuple[float, float]
@@ -34,10 +46,12 @@ class ArmJoint:
 
     @property
     def centre(self) -> float:
+        """The middle of the control range: the target of action 0."""
         return 0.5 * (self.ctrl_range[0] + self.ctrl_range[1])
 
     @property
     def half_range(self) -> float:
+        """Half the control range: the target moves this far for an action of 1."""
         return 0.5 * (self.ctrl_range[1] - self.ctrl_range[0])
 
 
@@ -53,7 +67,13 @@ ARM_JOINTS: tuple[ArmJoint, ...] = (
 
 
 def check_control(control: str) -> str:
-    """``control`` if it names a robot, else ValueError listing the valid ones.
+    """``control`` if it names a robot.
+
+    Args:
+        control (str): ``"mocap"`` or ``"joint"``.
+
+    Raises:
+        ValueError: an unknown control; the message lists the valid ones.
 
     Example:
         >>> check_control("joint")
@@ -65,7 +85,12 @@ def check_control(control: str) -> str:
 
 
 def action_size(control: str, gripper_blocked: bool) -> int:
-    """4 (mocap: dx, dy, dz, gripper); 7 arm targets under joint control, plus one gripper value unless blocked.
+    """The action's size: 4 under mocap (dx, dy, dz, gripper); under joint control 7 arm targets, plus one
+    gripper value unless the gripper is blocked.
+
+    Args:
+        control (str): ``"mocap"`` or ``"joint"``.
+        gripper_blocked (bool): the fingers are held closed (Push, Slide under joint control).
 
     Example:
         >>> action_size("joint", gripper_blocked=True), action_size("joint", gripper_blocked=False)
@@ -78,6 +103,9 @@ def action_size(control: str, gripper_blocked: bool) -> int:
 
 def add_joint_actuators(spec: mujoco.MjSpec) -> None:
     """Turns a gymnasium-robotics Fetch spec into CPER's joint-controlled robot (in place).
+
+    Args:
+        spec (mujoco.MjSpec): a gymnasium-robotics Fetch model, not yet compiled.
 
     Example:
         >>> import os, gymnasium_robotics
@@ -108,6 +136,10 @@ def add_joint_actuators(spec: mujoco.MjSpec) -> None:
 class JointController:
     """Maps actions in [-1, 1] to absolute actuator targets, and perturbs the arm at reset, for a compiled model.
 
+    Args:
+        model (mujoco.MjModel): a model built with :func:`add_joint_actuators`.
+        gripper_blocked (bool): the fingers take no action (7-D actions); else the eighth entry drives both.
+
     Example:
         >>> import os, gymnasium_robotics
         >>> path = os.path.join(os.path.dirname(gymnasium_robotics.__file__), "envs/assets/fetch/push.xml")
@@ -135,10 +167,16 @@ class JointController:
 
     @property
     def n_actions(self) -> int:
+        """The action's size (:func:`action_size`)."""
         return action_size("joint", self.gripper_blocked)
 
     def apply(self, data: mujoco.MjData, action: np.ndarray) -> None:
-        """Sets the actuator targets ``centre + a * half_range``, clipped to each control range."""
+        """Sets the actuator targets ``centre + a * half_range``, clipped to each control range.
+
+        Args:
+            data (mujoco.MjData): the simulation's data.
+            action (np.ndarray): ``[n_actions]`` in ``[-1, 1]``.
+        """
         data.ctrl[self._arm_ctrl] = np.clip(self._centre + action[: len(ARM_JOINTS)] * self._half, self._low, self._high)
         if self._finger_ctrl is not None:
             low, high = FINGER_CTRL_RANGE
@@ -146,7 +184,12 @@ class JointController:
             data.ctrl[self._finger_ctrl] = np.clip(centre + action[len(ARM_JOINTS)] * half, low, high)
 
     def set_initial_arm(self, data: mujoco.MjData, rng: np.random.Generator | None) -> None:
-        """Puts the arm at CPER's initial joints at rest, each perturbed by U(lo, hi) when ``rng`` is given."""
+        """Puts the arm at CPER's initial joints at rest, each perturbed by U(lo, hi) when ``rng`` is given.
+
+        Args:
+            data (mujoco.MjData): the simulation's data.
+            rng (np.random.Generator or None): draws the perturbation; ``None`` leaves the joints unperturbed.
+        """
         angles = self._initial.copy()
         if rng is not None:
             angles += rng.uniform(self._perturbation[:, 0], self._perturbation[:, 1])

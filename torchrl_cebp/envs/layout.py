@@ -31,6 +31,12 @@ _TOUCH_FIELDS: tuple[tuple[str, int], ...] = (("touch", 1), ("touch_total", 1))
 class ObservationLayout:
     """Named slices of a Fetch-style observation, with or without the two touch entries.
 
+    Every field name is also an attribute giving its slice (``layout.gripper_position``).
+
+    Args:
+        with_touch (bool, optional): the layout ends with ``touch`` and ``touch_total`` (27 entries
+            instead of 25). Defaults to ``False``.
+
     Example:
         >>> import numpy as np
         >>> layout = ObservationLayout(with_touch=True)
@@ -45,14 +51,27 @@ class ObservationLayout:
 
     @property
     def fields(self) -> tuple[tuple[str, int], ...]:
+        """``(name, size)`` of every field, in order."""
         return _FETCH_FIELDS + (_TOUCH_FIELDS if self.with_touch else ())
 
     @property
     def size(self) -> int:
+        """The observation's length."""
         return sum(size for _, size in self.fields)
 
     def slice(self, name: str) -> slice:
-        """The slice of field ``name``; KeyError listing the fields if unknown."""
+        """The slice of field ``name``.
+
+        Args:
+            name (str): a field of :attr:`fields`.
+
+        Raises:
+            KeyError: an unknown field; the message lists the fields.
+
+        Example:
+            >>> FETCH_OBSERVATION.slice("object_position")
+            slice(3, 6, None)
+        """
         start = 0
         for field, size in self.fields:
             if field == name:
@@ -66,11 +85,24 @@ class ObservationLayout:
         return self.slice(name)
 
     def gripper_opening(self, observation):
-        """Distance between the finger pads: the sum of the two finger positions (``[..., 1]`` kept as ``[...]``)."""
+        """Distance between the finger pads: the sum of the two finger positions.
+
+        Args:
+            observation (np.ndarray or torch.Tensor): ``[..., size]`` observations.
+
+        Returns:
+            ``[...]``: one opening per observation.
+        """
         return observation[..., self.finger_positions].sum(-1)
 
     def pack(self, **fields: np.ndarray) -> np.ndarray:
         """The float32 observation from every field of the layout, by name.
+
+        Args:
+            **fields (np.ndarray): one array per field, of its size.
+
+        Raises:
+            ValueError: a field is missing or unknown.
 
         Example:
             >>> parts = {name: np.full(size, i) for i, (name, size) in enumerate(FETCH_OBSERVATION.fields)}

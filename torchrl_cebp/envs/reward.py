@@ -20,6 +20,13 @@ def compute_reward_of(env: EnvBase) -> Callable[[torch.Tensor, torch.Tensor], to
     ``create_env_fn[0](**create_env_kwargs[0])`` (once, at that constructor's cost; a batched env's
     workers run one task). The batched env is neither started nor asked anything.
 
+    Args:
+        env (EnvBase): a :class:`~torchrl_cebp.envs.TouchFetchEnv`, possibly inside ``TransformedEnv``,
+            ``SerialEnv`` or ``ParallelEnv``.
+
+    Returns:
+        the innermost env's ``compute_reward``.
+
     Example:
         >>> import functools
         >>> from torchrl.envs import SerialEnv, StepCounter, TransformedEnv

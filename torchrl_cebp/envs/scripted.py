@@ -16,6 +16,14 @@ ACTION_SCALE = 0.05
 def move_towards(grip: np.ndarray, target: np.ndarray, gripper: float) -> np.ndarray:
     """The 4-D action moving the grip point towards ``target`` at top speed (magnitude 1 per axis until within a step).
 
+    Args:
+        grip (np.ndarray): the grip point's position.
+        target (np.ndarray): where it should go.
+        gripper (float): the gripper action, ``1`` open, ``-1`` closed.
+
+    Returns:
+        the float32 action ``[dx, dy, dz, gripper]``.
+
     Example:
         >>> move_towards(np.zeros(3), np.array([0.2, 0.01, 0.0]), gripper=-1.0).tolist()
         [1.0, 0.20000000298023224, 0.0, -1.0]
@@ -30,8 +38,8 @@ class GraspAndLift:
     the cube. It never lets go or grasps again once it carries, so a cube that slips out stays dropped.
 
     Args:
-        hover: height above the cube to line up at.
-        tolerance: how close the grip must come to a waypoint.
+        hover (float, optional): height above the cube to line up at. Defaults to ``0.05``.
+        tolerance (float, optional): how close the grip must come to a waypoint. Defaults to ``0.005``.
 
     Example:
         >>> script = GraspAndLift()

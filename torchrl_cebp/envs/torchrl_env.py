@@ -22,11 +22,22 @@ ALL_TASKS: tuple[str, ...] = (*TASKS, FRANKA_TASK)
 
 @dataclass(frozen=True)
 class RobotOptions:
-    """Which Fetch robot a task runs on (ORIGINAL_CODE.md §3); the defaults are gymnasium-robotics' mocap Fetch.
+    """Which Fetch robot a task runs on; the defaults are gymnasium-robotics' mocap Fetch.
 
-    ``control``: ``"mocap"`` (4-D Cartesian action) or ``"joint"`` (CPER's joint position control, the
-    released code's); ``touch_ignores_table``: the pads never feel the table (CPER's sensor bodies);
-    ``touch_in_observation``: the observation gains the step's touch and its running episode sum.
+    The defaults are robot A, the Initial commit's robot, on which the paper's Fig. 2 was made;
+    ``control="joint", touch_ignores_table=True`` (with ``touch_in_observation=True`` for PickAndPlace
+    and Slide) is robot B, the released code's.
+
+    Args:
+        control (str, optional): ``"mocap"`` (4-D Cartesian action) or ``"joint"`` (CPER's joint position
+            control, the released code's). Defaults to ``"mocap"``.
+        touch_ignores_table (bool, optional): the pads never feel the table (CPER's sensor bodies).
+            Defaults to ``False``.
+        touch_in_observation (bool, optional): the observation gains the step's touch and its running
+            episode sum. Defaults to ``False``.
+
+    Raises:
+        ValueError: ``control`` is not one of ``CONTROLS``.
 
     Example:
         >>> RobotOptions(control="joint", touch_ignores_table=True).label
@@ -52,16 +63,37 @@ class RobotOptions:
 
     @classmethod
     def from_config(cls, env: Mapping) -> "RobotOptions":
-        """The options an env config (``conf/env/*.yaml``) names; keys it lacks keep their defaults."""
+        """The options an env config (``conf/env/*.yaml``) names; keys it lacks keep their defaults.
+
+        Args:
+            env (Mapping): the env config.
+
+        Example:
+            >>> RobotOptions.from_config({"task": "push", "control": "joint"}).label
+            'joint'
+        """
         return cls(**{key: env[key] for key in ("control", "touch_ignores_table", "touch_in_observation") if key in env})
 
 
 def make_goal_env(task: str, goal_space: str = "standard", robot: RobotOptions = RobotOptions(),
                   grasped_start: float = 0.0, **kwargs):
-    """The gymnasium touch-sensing goal env of any task, Fetch or Franka (``kwargs`` go to gymnasium-robotics).
+    """The gymnasium touch-sensing goal env of any task, Fetch or Franka.
 
-    ``grasped_start``: the fraction of resets that begin with the cube grasped (:class:`FrankaPickPlaceEnv`;
-    the Franka task only).
+    Args:
+        task (str): one of ``ALL_TASKS``.
+        goal_space (str, optional): ``"standard"`` or ``"extended"`` (the Franka task: ``"standard"`` only).
+            Defaults to ``"standard"``.
+        robot (RobotOptions, optional): the Fetch robot (the Franka task: the defaults only).
+            Defaults to ``RobotOptions()``.
+        grasped_start (float, optional): the fraction of resets that begin with the cube grasped
+            (:class:`~torchrl_cebp.envs.FrankaPickPlaceEnv`; the Franka task only). Defaults to ``0.0``.
+        **kwargs: passed to gymnasium-robotics' env (``render_mode``, ``max_episode_steps``, ...).
+
+    Returns:
+        the gymnasium env, with its ``touch`` attribute.
+
+    Raises:
+        ValueError: an unknown task, or options the task does not have.
 
     Example:
         >>> make_goal_env("franka_pick_place").max_episode_steps
@@ -81,7 +113,7 @@ _OBS_KEYS = ("observation", "achieved_goal", "desired_goal")
 
 
 class TouchFetchEnv(EnvBase):
-    """A touch-sensing Fetch task as a TorchRL env (build it with :func:`make_env`).
+    """A touch-sensing Fetch or Franka task as a TorchRL env (build it with :func:`make_env`).
 
     Root and ``"next"`` carry float32 ``observation`` [25] (27 with ``touch_in_observation``), ``achieved_goal`` [3], ``desired_goal`` [3],
     ``touch`` [2] (left, right; mean over the physics substeps) and bool ``is_success`` [1];
@@ -91,6 +123,20 @@ class TouchFetchEnv(EnvBase):
     With ``num_envs=n`` one env steps ``n`` MuJoCo simulations in a loop and has batch size ``[n]``:
     TorchRL's per-step overhead is then paid once per batch instead of once per simulation, which
     makes it several times cheaper than ``SerialEnv(n, ...)`` for these fast simulations.
+
+    Args:
+        task (str): one of ``ALL_TASKS``.
+        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
+        device (torch.device or str, optional): where the env's tensors live. Defaults to ``"cpu"``.
+        num_envs (int, optional): how many simulations one env steps; ``None`` gives an unbatched env.
+            Defaults to ``None``.
+        render_size (tuple of int, optional): ``(width, height)`` of the frames :meth:`render` returns;
+            ``None`` renders nothing. Defaults to ``None``.
+        robot (RobotOptions, optional): the Fetch robot. Defaults to ``RobotOptions()``.
+        episode_steps (int, optional): replaces the task's episode length; ``None`` keeps its goal space's.
+            Defaults to ``None``.
+        grasped_start (float, optional): the fraction of episodes that begin with the cube grasped (the
+            Franka task only). Defaults to ``0.0``.
 
     Example:
         >>> env = TouchFetchEnv("push", "extended")
@@ -155,7 +201,14 @@ class TouchFetchEnv(EnvBase):
         )
 
     def compute_reward(self, achieved_goal: torch.Tensor, desired_goal: torch.Tensor) -> torch.Tensor:
-        """Sparse reward for any leading batch dims: float32 [..., 1], 0 within the threshold else -1.
+        """Sparse reward for any leading batch dims: 0 within the distance threshold, else -1.
+
+        Args:
+            achieved_goal (torch.Tensor): ``[..., 3]`` object positions.
+            desired_goal (torch.Tensor): ``[..., 3]`` targets.
+
+        Returns:
+            float32 ``[..., 1]``.
 
         Example:
             >>> env = TouchFetchEnv("push")
@@ -249,17 +302,32 @@ def make_env(
     episode_steps: int | None = None,
     grasped_start: float = 0.0,
 ) -> EnvBase:
-    """The TorchRL env of ``task`` (``pick_place``, ``push``, ``slide``, ``franka_pick_place``) under ``goal_space``.
+    """The TorchRL env of ``task`` under ``goal_space``.
 
-    Fetch tasks have the ``standard`` and ``extended`` goal spaces and both robots (:class:`RobotOptions`:
-    ``control``, ``touch_ignores_table``, ``touch_in_observation``); the Franka task only ``standard`` and mocap.
+    Fetch tasks have the ``standard`` and ``extended`` goal spaces and both robots (:class:`RobotOptions`);
+    the Franka task only ``standard`` and mocap. Picklable through ``functools.partial``, e.g. for
+    ``ParallelEnv``.
 
-    ``episode_steps`` replaces the task's episode length (``None``: its goal space's, or the Franka's 100; the
-    Initial commit ran Slide with 70 steps on the standard goals, gymnasium's Slide has 50). ``grasped_start``:
-    the fraction of episodes that begin with the cube grasped (the Franka task only; for training envs).
+    Args:
+        task (str): ``"pick_place"``, ``"push"``, ``"slide"`` or ``"franka_pick_place"``.
+        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
+        seed (int, optional): seeds simulation ``i`` with ``seed + i``; ``None`` leaves them unseeded.
+            Defaults to ``None``.
+        device (torch.device or str, optional): where the env's tensors live. Defaults to ``"cpu"``.
+        num_envs (int, optional): ``n`` gives one env of batch size ``[n]`` stepping ``n`` simulations;
+            ``None`` gives an unbatched env. Defaults to ``None``.
+        render_size (tuple of int, optional): ``(width, height)``; enables ``env.render()``. Defaults to ``None``.
+        control (str, optional): ``"mocap"`` or ``"joint"`` (:class:`RobotOptions`). Defaults to ``"mocap"``.
+        touch_ignores_table (bool, optional): see :class:`RobotOptions`. Defaults to ``False``.
+        touch_in_observation (bool, optional): see :class:`RobotOptions`. Defaults to ``False``.
+        episode_steps (int, optional): replaces the task's episode length; ``None`` keeps its goal space's
+            (the Franka's: 100). The Initial commit ran Slide with 70 steps on the standard goals;
+            gymnasium's Slide has 50. Defaults to ``None``.
+        grasped_start (float, optional): the fraction of episodes that begin with the cube grasped (the
+            Franka task only; for training envs). Defaults to ``0.0``.
 
-    ``num_envs=n`` gives one env of batch size ``[n]`` stepping ``n`` simulations (seeded
-    ``seed``, ``seed + 1``, ...); ``render_size=(width, height)`` enables ``env.render()``. Picklable through ``functools.partial``, e.g. for ``ParallelEnv``.
+    Returns:
+        a :class:`TouchFetchEnv`.
 
     Example:
         >>> env = make_env("pick_place", "extended", seed=0)
@@ -278,9 +346,14 @@ def make_env(
 
 
 def make_env_from_config(env: Mapping, **kwargs) -> EnvBase:
-    """The env an env config names (``conf/env/*.yaml``, or a checkpoint's saved one); ``kwargs`` go to :func:`make_env`.
+    """The env an env config names (``conf/env/*.yaml``, or a checkpoint's saved one).
 
     The config's ``grasped_start`` is not applied: it is for training envs, which pass it in ``kwargs``.
+
+    Args:
+        env (Mapping): the env config: ``task`` and ``goal_space``, and optionally the :class:`RobotOptions`
+            keys and ``episode_steps``.
+        **kwargs: passed to :func:`make_env` (``seed``, ``num_envs``, ...).
 
     Example:
         >>> make_env_from_config({"task": "push", "goal_space": "extended", "control": "joint"}).action_spec.shape

@@ -20,6 +20,13 @@ def add_touch_pad(
 
     A touch sensor reports the summed normal force of the contacts inside its site's volume.
 
+    Args:
+        spec (mujoco.MjSpec): the model, not yet compiled.
+        body_name (str): the body carrying the pad.
+        side (str): ``"left"`` or ``"right"``: names the site and sensor.
+        half_size (tuple of float): the box site's half-sizes.
+        pos (tuple of float): the site's position in the body's frame.
+
     Example:
         >>> spec = mujoco.MjSpec()
         >>> _ = spec.worldbody.add_body(name="finger")
@@ -58,6 +65,14 @@ def add_table_blind_touch_pad(
     first geom, whose contacts with ``table_body`` are excluded, and the pad site and sensor of
     :func:`add_touch_pad`. A touch sensor only counts contacts of its own body's geoms, so the finger
     itself still stands on the table while the pad reads only the object and anything else.
+
+    Args:
+        spec (mujoco.MjSpec): the model, not yet compiled.
+        finger_body (str): the finger link the sensor body hangs from.
+        side (str): ``"left"`` or ``"right"``: names the body, site and sensor.
+        half_size (tuple of float): the box site's half-sizes.
+        pos (tuple of float): the site's position in the sensor body's frame.
+        table_body (str, optional): the body whose contacts the pad never feels. Defaults to ``"table0"``.
 
     Example:
         >>> import os, gymnasium_robotics
@@ -115,14 +130,26 @@ class TouchReporting:
         )
 
     def substep_touch(self) -> np.ndarray:
+        """The two sensors' current readings ``[left, right]`` (a view into ``data.sensordata``)."""
         return self.data.sensordata[self._touch_adr]
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        """gymnasium's ``step``, with the step's touch in ``info["touch"]``.
+
+        Args:
+            action (np.ndarray): the env's action.
+        """
         obs, reward, terminated, truncated, info = super().step(action)
         info["touch"] = self.touch.copy()
         return obs, reward, terminated, truncated, info
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        """gymnasium's ``reset``, with the touch at the reset state in ``info["touch"]``.
+
+        Args:
+            seed (int, optional): reseeds the env's generator. Defaults to ``None``.
+            options (dict, optional): gymnasium's reset options. Defaults to ``None``.
+        """
         obs, info = super().reset(seed=seed, options=options)
         # mj_forward in _reset_sim has evaluated the sensors at the reset state.
         self.touch = self.substep_touch().copy()

@@ -4,11 +4,12 @@ The touch sites and sensors are added to the XML that ships with gymnasium-robot
 ``mujoco.MjSpec``, so no robot XML is copied. Each step reports the touch of the left and right
 finger averaged over the physics substeps in ``info["touch"]`` (also ``env.touch``).
 
-Two robots (ORIGINAL_CODE.md §3): ``control="mocap"``, gymnasium-robotics' Fetch (4-D Cartesian
-action, the CEBP code's Initial commit), and ``control="joint"``, CPER's joint-position-controlled
-Fetch (the released ICRA commit; :mod:`torchrl_cebp.envs.joint_control`). ``touch_ignores_table``
-puts the pads on CPER's sensor bodies, which never feel the table; ``touch_in_observation`` appends
-the step's touch and its running episode sum to the observation (:mod:`torchrl_cebp.envs.layout`).
+Two robots: ``control="mocap"``, robot A, gymnasium-robotics' Fetch (4-D Cartesian action, the CEBP
+code's Initial commit, on which the paper's Fig. 2 was made), and ``control="joint"``, robot B, CPER's
+joint-position-controlled Fetch (the released ICRA commit; :mod:`torchrl_cebp.envs.joint_control`).
+``touch_ignores_table`` puts the pads on CPER's sensor bodies, which never feel the table;
+``touch_in_observation`` appends the step's touch and its running episode sum to the observation
+(:mod:`torchrl_cebp.envs.layout`).
 
 Registered gymnasium ids: ``TouchFetch{PickAndPlace,Push,Slide}[Joint][Extended]-v0``: one per
 control (the action spaces differ) and goal space (``max_episode_steps`` differs); the touch
@@ -48,9 +49,17 @@ def touch_spec(
 ) -> mujoco.MjSpec:
     """Load a Fetch XML and add a visible touch-sensing box site on each finger's inner pad.
 
-    ``table_half_size`` resizes the table keeping its edge next to the robot in place;
-    ``control="joint"`` makes it CPER's joint-controlled robot; ``touch_ignores_table`` puts the
-    pads on sensor bodies that never touch the table.
+    Args:
+        model_path (str): the gymnasium-robotics Fetch XML.
+        table_half_size (tuple of float, optional): resizes the table (x, y), keeping its edge next to the
+            robot in place; ``None`` keeps the XML's table. Defaults to ``None``.
+        control (str, optional): ``"mocap"``, or ``"joint"`` for CPER's joint-controlled robot.
+            Defaults to ``"mocap"``.
+        touch_ignores_table (bool, optional): puts the pads on sensor bodies that never touch the table.
+            Defaults to ``False``.
+
+    Returns:
+        the uncompiled ``mujoco.MjSpec``.
 
     Example:
         >>> import os, gymnasium_robotics
@@ -103,7 +112,7 @@ class _TouchFetchMixin(TouchReporting):
         self.obj_range = self.space.obj_range
         self.target_range = self.space.target_range
         self.distance_threshold = self.space.distance_threshold
-        # The Initial commit registered Slide with 70-step episodes on the standard goals (issue 28).
+        # The Initial commit registered Slide with 70-step episodes on the standard goals.
         self.max_episode_steps = max_episode_steps or self.space.max_episode_steps
         if self.joint_controller is not None:
             self.action_space = spaces.Box(-1.0, 1.0, shape=(self.joint_controller.n_actions,), dtype=np.float32)
@@ -209,6 +218,8 @@ class _TouchFetchMixin(TouchReporting):
 class TouchFetchPickAndPlaceEnv(_TouchFetchMixin, MujocoFetchPickAndPlaceEnv):
     """Fetch PickAndPlace with finger touch sensors.
 
+    Takes the keyword arguments of :func:`make_touch_fetch`.
+
     Example:
         >>> env = TouchFetchPickAndPlaceEnv(goal_space="extended")
         >>> _, info = env.reset(seed=0)
@@ -222,6 +233,8 @@ class TouchFetchPickAndPlaceEnv(_TouchFetchMixin, MujocoFetchPickAndPlaceEnv):
 class TouchFetchPushEnv(_TouchFetchMixin, MujocoFetchPushEnv):
     """Fetch Push (gripper blocked closed) with finger touch sensors.
 
+    Takes the keyword arguments of :func:`make_touch_fetch`.
+
     Example:
         >>> env = TouchFetchPushEnv()
         >>> _ = env.reset(seed=0)
@@ -234,6 +247,8 @@ class TouchFetchPushEnv(_TouchFetchMixin, MujocoFetchPushEnv):
 
 class TouchFetchSlideEnv(_TouchFetchMixin, MujocoFetchSlideEnv):
     """Fetch Slide with finger touch sensors.
+
+    Takes the keyword arguments of :func:`make_touch_fetch`.
 
     Example:
         >>> TouchFetchSlideEnv(goal_space="extended").max_episode_steps
@@ -251,7 +266,16 @@ TOUCH_FETCH_CLASSES: dict[str, type[_TouchFetchMixin]] = {
 def make_touch_fetch(task: str, goal_space: str = "standard", **kwargs: Any) -> _TouchFetchMixin:
     """Build the (unwrapped) gymnasium touch-sensing Fetch env.
 
-    ``kwargs``: ``control``, ``touch_ignores_table``, ``touch_in_observation``, and gymnasium-robotics' own.
+    Args:
+        task (str): ``"pick_place"``, ``"push"`` or ``"slide"``.
+        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
+        **kwargs: ``control`` (``"mocap"`` or ``"joint"``, default ``"mocap"``), ``touch_ignores_table``
+            and ``touch_in_observation`` (default ``False``; see :class:`~torchrl_cebp.envs.RobotOptions`),
+            ``max_episode_steps`` (default: the goal space's), and gymnasium-robotics' own
+            (``render_mode``, ``width``, ``height``, ...).
+
+    Raises:
+        ValueError: an unknown task, goal space or control.
 
     Example:
         >>> env = make_touch_fetch("push", "extended", render_mode="rgb_array", width=64, height=48)
@@ -267,6 +291,11 @@ def make_touch_fetch(task: str, goal_space: str = "standard", **kwargs: Any) -> 
 
 def gym_id(task: str, goal_space: str = "standard", control: str = "mocap") -> str:
     """The registered gymnasium id of ``task`` under ``goal_space`` and ``control``.
+
+    Args:
+        task (str): ``"pick_place"``, ``"push"`` or ``"slide"``.
+        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
+        control (str, optional): ``"mocap"`` or ``"joint"``. Defaults to ``"mocap"``.
 
     Example:
         >>> gym_id("pick_place", "extended"), gym_id("push", "extended", "joint")

@@ -125,6 +125,9 @@ def _as_flag(item: str) -> str:
 def parse_args(argv: Sequence[str]) -> tuple[str, dict[str, Any]]:
     """``COMMAND key=value ...`` (or ``--key value``) -> (command, options); exits with usage on a bad one.
 
+    Args:
+        argv (sequence of str): the command line after the program name.
+
     Example:
         >>> parse_args(["run", "policy=scripted", "episodes=2"])[1]["episodes"]
         2
@@ -146,7 +149,11 @@ def parse_args(argv: Sequence[str]) -> tuple[str, dict[str, Any]]:
 
 
 def build_loop(options: dict[str, Any]) -> tuple[RealLoopEnv, RobotBackend]:
-    """The backend and :class:`RealLoopEnv` (with its cameras) an options dict describes (``sim``: the MuJoCo twin)."""
+    """The backend and :class:`RealLoopEnv` (with its cameras) an options dict describes (``sim``: the MuJoCo twin).
+
+    Args:
+        options (dict): the options :func:`parse_args` returns for the command.
+    """
     goal = np.asarray(options["goal"]) if options["goal"] else None
     views = 1 + options["side_camera"]
     if options["backend"] == "sim":
@@ -196,6 +203,9 @@ def held_steps(td: TensorDictBase) -> Counter[str]:
     A step holds when the observation its action came from was not perceived (``"markers"``, ``"cube"``)
     or the action was not finite (``"invalid_action"``); a lost camera (``"camera_lost"``) stops the robot.
 
+    Args:
+        td (TensorDictBase): a rollout of :class:`RealLoopEnv`.
+
     Example:
         >>> td = TensorDict({"perception_ok": torch.tensor([[True], [False]]), "perception_status": torch.tensor([[0], [2]]),
         ...                  "next": {"safety_status": torch.tensor([[0], [2]])}}, [2])
@@ -222,6 +232,9 @@ def run(options: dict[str, Any]) -> dict[str, Any]:
     cube position. With ``compare_sim`` each episode is replayed in plain simulation (true state, no
     camera) on the same cube placement and goal: the summary then sets the loop's success rates beside the
     simulation's.
+
+    Args:
+        options (dict): the options :func:`parse_args` returns for the command.
     """
     env, backend = build_loop(options)
     knows_truth = hasattr(backend, "cube_position")  # the twin knows where the cube truly is; a real robot does not
@@ -273,7 +286,11 @@ def run(options: dict[str, Any]) -> dict[str, Any]:
 
 
 def calibrate(options: dict[str, Any]) -> TableCalibration:
-    """Writes the calibration file: read off the twin's model, or measured by jogging the real arm to each marker."""
+    """Writes the calibration file: read off the twin's model, or measured by jogging the real arm to each marker.
+
+    Args:
+        options (dict): the options :func:`parse_args` returns for the command.
+    """
     if options["backend"] == "sim":
         from torchrl_cebp.sim2real.twin import MuJoCoTwinBackend
 
@@ -297,6 +314,9 @@ def debug(options: dict[str, Any]) -> list[Path]:
 
     The frames as the camera gave them go to ``out/raw`` (replay them with the ``perceive`` command); the
     side camera's, with ``side_camera=true``, to ``out/side`` and ``out/side/raw``, and the video shows both.
+
+    Args:
+        options (dict): the options :func:`parse_args` returns for the command.
     """
     video = video_path(options["video"]) if options["video"] else None  # a bad name fails before the episode
     env, _ = build_loop(options)
@@ -332,7 +352,11 @@ def debug(options: dict[str, Any]) -> list[Path]:
 
 
 def perceive(options: dict[str, Any]) -> list[Path]:
-    """Camera-only debugging: runs the perception on a folder of recorded frames and writes them annotated."""
+    """Camera-only debugging: runs the perception on a folder of recorded frames and writes them annotated.
+
+    Args:
+        options (dict): the options :func:`parse_args` returns for the command.
+    """
     if options["calibration"]:
         calibration = TableCalibration.load(options["calibration"])
     else:
@@ -360,7 +384,15 @@ def perceive(options: dict[str, Any]) -> list[Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m torchrl_cebp.sim2real`` (``--help`` on it and on every command)."""
+    """Entry point of ``python -m torchrl_cebp.sim2real`` (``--help`` on it and on every command).
+
+    Args:
+        argv (sequence of str, optional): the command line after the program name; ``None`` reads ``sys.argv``.
+            Defaults to ``None``.
+
+    Returns:
+        the exit status.
+    """
     command, options = parse_args(sys.argv[1:] if argv is None else argv)
     torch.set_num_threads(1)
     try:

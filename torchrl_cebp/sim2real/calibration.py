@@ -22,12 +22,28 @@ _MIN_WORKSPACE_AREA = 1e-4
 
 
 def aruco_dictionary_names() -> list[str]:
-    """The predefined ArUco dictionary names of this OpenCV build, e.g. ``"DICT_4X4_50"``."""
+    """The predefined ArUco dictionary names of this OpenCV build, e.g. ``"DICT_4X4_50"``.
+
+    Example:
+        >>> "DICT_4X4_50" in aruco_dictionary_names()
+        True
+    """
     return sorted(name for name in dir(cv2.aruco) if name.startswith("DICT_"))
 
 
 def aruco_dictionary(name: str) -> cv2.aruco.Dictionary:
-    """The predefined ArUco dictionary called ``name``; a ``ValueError`` listing the valid names otherwise."""
+    """The predefined ArUco dictionary called ``name``.
+
+    Args:
+        name (str): one of :func:`aruco_dictionary_names`.
+
+    Raises:
+        ValueError: an unknown name; the message lists the valid ones.
+
+    Example:
+        >>> aruco_dictionary("DICT_4X4_50").bytesList.shape[0]
+        50
+    """
     valid = aruco_dictionary_names()
     if name not in valid:
         raise ValueError(f"Unknown ArUco dictionary {name!r}; valid names: {', '.join(valid)}.")
@@ -39,9 +55,10 @@ class TableCalibration:
     """Robot-frame positions of the table markers, saved as YAML or JSON.
 
     Args:
-        marker_positions: marker id -> robot-frame ``(x, y)`` of the marker centre, in metres; at least 4.
-        aruco_dictionary: name of the predefined ArUco dictionary the markers were printed from.
-        table_height: robot-frame ``z`` of the table surface, in metres.
+        marker_positions (dict): marker id -> robot-frame ``(x, y)`` of the marker centre, in metres; at least 4.
+        aruco_dictionary (str, optional): name of the predefined ArUco dictionary the markers were printed from.
+            Defaults to ``"DICT_4X4_50"``.
+        table_height (float, optional): robot-frame ``z`` of the table surface, in metres. Defaults to ``0.0``.
 
     Raises:
         ValueError: fewer than 4 markers, an unknown dictionary name (the valid ones are listed),
@@ -91,7 +108,12 @@ class TableCalibration:
         return sorted(self.marker_positions)
 
     def robot_points(self, ids: list[int] | None = None) -> np.ndarray:
-        """Robot-frame ``(x, y)`` of the markers ``ids`` (default: all, sorted) as a float32 ``[N, 2]`` array."""
+        """Robot-frame ``(x, y)`` of the markers ``ids`` as a float32 ``[N, 2]`` array.
+
+        Args:
+            ids (list of int, optional): the markers, in the order wanted; ``None`` is all of them, sorted.
+                Defaults to ``None``.
+        """
         ids = self.marker_ids if ids is None else ids
         return np.array([self.marker_positions[i] for i in ids], dtype=np.float32)
 
@@ -103,7 +125,14 @@ class TableCalibration:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TableCalibration:
-        """Builds a calibration from :meth:`to_dict`'s layout; unknown fields are an error, not ignored."""
+        """Builds a calibration from :meth:`to_dict`'s layout.
+
+        Args:
+            data (dict): the fields of :meth:`to_dict`.
+
+        Raises:
+            ValueError: an unknown field (not ignored), or an invalid calibration.
+        """
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)
         if unknown:
@@ -111,14 +140,28 @@ class TableCalibration:
         return cls(**data)
 
     def save(self, path: str | Path) -> None:
-        """Writes the calibration as YAML (``.yaml``/``.yml``) or JSON (``.json``)."""
+        """Writes the calibration as YAML or JSON.
+
+        Args:
+            path (str or Path): ends in ``.yaml``, ``.yml`` or ``.json``.
+
+        Raises:
+            ValueError: another ending.
+        """
         path = Path(path)
         dump, _ = _format(path)
         path.write_text(dump(self.to_dict()))
 
     @classmethod
     def load(cls, path: str | Path) -> TableCalibration:
-        """Reads a calibration written by :meth:`save` (or by hand in the same layout)."""
+        """Reads a calibration written by :meth:`save` (or by hand in the same layout).
+
+        Args:
+            path (str or Path): a ``.yaml``, ``.yml`` or ``.json`` file.
+
+        Raises:
+            ValueError: another ending, a file without a mapping, or an invalid calibration.
+        """
         path = Path(path)
         _, parse = _format(path)
         data = parse(path.read_text())

@@ -19,11 +19,32 @@ __all__ = ["CameraLost", "FrameSource", "ImageFolderCamera", "OpenCVCamera", "ch
 
 
 class CameraLost(RuntimeError):
-    """The camera stopped delivering frames (unplugged, stream dropped, recording exhausted)."""
+    """The camera stopped delivering frames (unplugged, stream dropped, recording exhausted).
+
+    Example:
+        >>> import cv2, numpy as np, tempfile, os
+        >>> folder = tempfile.mkdtemp()
+        >>> _ = cv2.imwrite(os.path.join(folder, "frame_0.png"), np.zeros((4, 6, 3), np.uint8))
+        >>> camera = ImageFolderCamera(folder)
+        >>> _ = camera.read()
+        >>> try:
+        ...     camera.read()
+        ... except CameraLost as lost:
+        ...     print(str(lost).endswith("delivered no frame."))
+        True
+    """
 
 
 def check_frame(frame: np.ndarray, expected_size: tuple[int, int] | None = None) -> np.ndarray:
     """Checks that ``frame`` is a non-empty ``H x W x 3`` ``uint8`` image, of ``expected_size=(H, W)`` if given.
+
+    Args:
+        frame (np.ndarray): the image.
+        expected_size (tuple of int, optional): ``(height, width)``; ``None`` accepts any size.
+            Defaults to ``None``.
+
+    Returns:
+        ``frame`` itself.
 
     Raises:
         ValueError: naming the shape (and dtype) that was got and the one that was expected.
@@ -51,7 +72,17 @@ class FrameSource(ABC):
     Subclasses implement :meth:`_grab`, returning ``None`` when no frame can be had.
 
     Args:
-        expected_size: ``(height, width)`` every frame must have; ``None`` accepts any size.
+        expected_size (tuple of int, optional): ``(height, width)`` every frame must have; ``None`` accepts
+            any size. Defaults to ``None``.
+
+    Example:
+        >>> import numpy as np
+        >>> class Grey(FrameSource):
+        ...     def _grab(self):
+        ...         return np.full((4, 6, 3), 128, np.uint8)
+        >>> with Grey(expected_size=(4, 6)) as camera:
+        ...     camera.read().shape
+        (4, 6, 3)
     """
 
     def __init__(self, expected_size: tuple[int, int] | None = None) -> None:
@@ -61,7 +92,12 @@ class FrameSource(ABC):
     def _grab(self) -> np.ndarray | None: ...
 
     def read(self) -> np.ndarray:
-        """Returns the next frame (``H x W x 3`` uint8 BGR); raises :class:`CameraLost` if there is none."""
+        """Returns the next frame (``H x W x 3`` uint8 BGR).
+
+        Raises:
+            CameraLost: there is no frame.
+            ValueError: the frame is not of the expected size or type.
+        """
         frame = self._grab()
         if frame is None:
             raise CameraLost(f"{self!r} delivered no frame.")
@@ -86,9 +122,11 @@ class OpenCVCamera(FrameSource):
     """A ``cv2.VideoCapture`` source: a device index, a video file or a stream URL.
 
     Args:
-        source: device index (``0`` is the first webcam), video file path or stream URL.
-        expected_size: ``(height, width)`` every frame must have; ``None`` accepts any size.
-        api_preference: OpenCV capture backend, e.g. ``cv2.CAP_V4L2``; the default lets OpenCV choose.
+        source (int, str or Path): device index (``0`` is the first webcam), video file path or stream URL.
+        expected_size (tuple of int, optional): ``(height, width)`` every frame must have; ``None`` accepts
+            any size. Defaults to ``None``.
+        api_preference (int, optional): OpenCV capture backend, e.g. ``cv2.CAP_V4L2``. Defaults to
+            ``cv2.CAP_ANY`` (OpenCV chooses).
 
     Raises:
         CameraLost: if the source cannot be opened.
@@ -120,6 +158,7 @@ class OpenCVCamera(FrameSource):
         return frame if ok else None
 
     def close(self) -> None:
+        """Releases the capture."""
         self._capture.release()
 
     def __repr__(self) -> str:
@@ -135,10 +174,16 @@ class ImageFolderCamera(FrameSource):
     """Replays the images of a folder in natural name order, for a camera-only debug mode.
 
     Args:
-        folder: folder of recorded frames.
-        expected_size: ``(height, width)`` every frame must have; ``None`` accepts any size.
-        loop: start again at the first image after the last instead of raising :class:`CameraLost`.
-        extensions: file name endings (lower case) that count as images.
+        folder (str or Path): folder of recorded frames.
+        expected_size (tuple of int, optional): ``(height, width)`` every frame must have; ``None`` accepts
+            any size. Defaults to ``None``.
+        loop (bool, optional): start again at the first image after the last instead of raising
+            :class:`CameraLost`. Defaults to ``False``.
+        extensions (tuple of str, optional): file name endings (lower case) that count as images.
+            Defaults to ``(".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")``.
+
+    Raises:
+        FileNotFoundError: the folder does not exist or holds no images.
 
     Examples:
         >>> import cv2, numpy as np, tempfile, os

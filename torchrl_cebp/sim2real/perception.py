@@ -38,11 +38,20 @@ __all__ = [
 
 
 class PerceptionStatus(IntEnum):
-    """Outcome of one frame; the integer is what :class:`CubePerception` writes to the tensordict."""
+    """Outcome of one frame; the integer is what :class:`CubePerception` writes to the tensordict.
+
+    ``OK`` (0): the cube is located. ``MARKERS`` (1): fewer than 4 calibrated markers are visible and the
+    camera is not confirmed unmoved, so there is no homography. ``CUBE`` (2): no colour blob of at least
+    the minimum area.
+
+    Example:
+        >>> PerceptionStatus(2).reason, int(PerceptionStatus.OK)
+        ('cube', 0)
+    """
 
     OK = 0
-    MARKERS = 1  # fewer than 4 calibrated markers visible, and the camera not confirmed unmoved: no homography
-    CUBE = 2  # no colour blob of at least the minimum area
+    MARKERS = 1
+    CUBE = 2
 
     @property
     def reason(self) -> str:
@@ -63,9 +72,11 @@ class MarkerDetector:
     """Finds ArUco markers in a BGR frame and returns the pixel centre of each.
 
     Args:
-        dictionary: predefined ArUco dictionary name, e.g. ``"DICT_4X4_50"``.
-        ids: only these marker ids are reported (others in view are ignored); ``None`` reports all.
-        parameters: OpenCV detector parameters; the defaults refine corners to sub-pixel accuracy.
+        dictionary (str, optional): predefined ArUco dictionary name. Defaults to ``"DICT_4X4_50"``.
+        ids (iterable of int, optional): only these marker ids are reported (others in view are ignored);
+            ``None`` reports all. Defaults to ``None``.
+        parameters (cv2.aruco.DetectorParameters, optional): OpenCV detector parameters; ``None`` gives
+            OpenCV's defaults with corners refined to sub-pixel accuracy. Defaults to ``None``.
 
     Examples:
         >>> import cv2, numpy as np
@@ -90,7 +101,11 @@ class MarkerDetector:
         self._detector = cv2.aruco.ArucoDetector(aruco_dictionary(dictionary), parameters)
 
     def detect(self, frame: np.ndarray) -> dict[int, np.ndarray]:
-        """Marker id -> pixel centre ``(u, v)`` (float64) of each wanted marker seen exactly once."""
+        """Marker id -> pixel centre ``(u, v)`` (float64) of each wanted marker seen exactly once.
+
+        Args:
+            frame (np.ndarray): ``H x W x 3`` uint8 BGR.
+        """
         corners, ids, _ = self._detector.detectMarkers(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
         if ids is None:
             return {}
@@ -107,6 +122,13 @@ def fit_homography(pixel_points: np.ndarray, robot_points: np.ndarray) -> np.nda
 
     Exactly 4 correspondences use ``cv2.getPerspectiveTransform``; more use a least-squares
     ``cv2.findHomography`` over all of them.
+
+    Args:
+        pixel_points (np.ndarray): ``[N, 2]`` pixel ``(u, v)``, ``N >= 4``.
+        robot_points (np.ndarray): the matching ``[N, 2]`` robot-frame ``(x, y)``.
+
+    Raises:
+        ValueError: fewer than 4 pairs, or unequal counts.
 
     Examples:
         >>> import numpy as np
@@ -129,14 +151,35 @@ def fit_homography(pixel_points: np.ndarray, robot_points: np.ndarray) -> np.nda
 
 
 def apply_homography(homography: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Maps ``[N, 2]`` points through ``homography``; returns ``[N, 2]`` float64."""
+    """Maps ``[N, 2]`` points through ``homography``; returns ``[N, 2]`` float64.
+
+    Args:
+        homography (np.ndarray): ``3 x 3``.
+        points (np.ndarray): ``[N, 2]``.
+
+    Example:
+        >>> apply_homography(np.diag([2.0, 3.0, 1.0]), np.array([[1.0, 1.0]])).tolist()
+        [[2.0, 3.0]]
+    """
     points = np.asarray(points, np.float64).reshape(-1, 1, 2)
     return cv2.perspectiveTransform(points, np.asarray(homography, np.float64)).reshape(-1, 2)
 
 
 @dataclass(frozen=True)
 class HSVRange:
-    """An inclusive OpenCV HSV box (hue 0-180, saturation and value 0-255)."""
+    """An inclusive OpenCV HSV box (hue 0-180, saturation and value 0-255).
+
+    Args:
+        lower (tuple of int): the lowest ``(h, s, v)``.
+        upper (tuple of int): the highest ``(h, s, v)``.
+
+    Example:
+        >>> import numpy as np
+        >>> blue = HSVRange((100, 100, 50), (130, 255, 255))
+        >>> frame = np.zeros((40, 40, 3), np.uint8); frame[10:30, 10:30] = (255, 0, 0)
+        >>> ColorBlobDetector([blue], min_area=50).detect(frame).centre.tolist()
+        [19.5, 19.5]
+    """
 
     lower: tuple[int, int, int]
     upper: tuple[int, int, int]
@@ -151,7 +194,20 @@ RED_HSV_RANGES: tuple[HSVRange, ...] = (
 
 @dataclass(frozen=True)
 class Blob:
-    """A detected colour region: pixel centroid ``(u, v)``, outer contour ``[N, 1, 2]`` and area in pixels."""
+    """A detected colour region, as :meth:`ColorBlobDetector.detect` returns it.
+
+    Args:
+        centre (np.ndarray): pixel centroid ``(u, v)``.
+        contour (np.ndarray): outer contour ``[N, 1, 2]``.
+        area (float): area in pixels.
+
+    Example:
+        >>> import numpy as np
+        >>> frame = np.zeros((40, 40, 3), np.uint8); frame[10:20, 10:30] = (0, 0, 255)
+        >>> blob = ColorBlobDetector(min_area=50).detect(frame)
+        >>> blob.area, blob.contour.shape[1:]
+        (165.0, (1, 2))
+    """
 
     centre: np.ndarray
     contour: np.ndarray
@@ -162,10 +218,14 @@ class ColorBlobDetector:
     """Finds the largest region inside any of some HSV ranges (by default: red).
 
     Args:
-        hsv_ranges: the colour boxes; a pixel in any of them counts.
-        min_area: smaller regions (pixels) are noise, not the cube.
-        open_kernel: side of the morphological opening that removes speckle before contours are taken;
-            ``0`` or ``1`` disables it.
+        hsv_ranges (sequence of HSVRange, optional): the colour boxes; a pixel in any of them counts.
+            Defaults to ``RED_HSV_RANGES``.
+        min_area (float, optional): smaller regions (pixels) are noise, not the cube. Defaults to ``100.0``.
+        open_kernel (int, optional): side of the morphological opening that removes speckle before contours
+            are taken; ``0`` or ``1`` disables it. Defaults to ``5``.
+
+    Raises:
+        ValueError: no HSV range.
 
     Examples:
         >>> import numpy as np
@@ -188,7 +248,11 @@ class ColorBlobDetector:
         )
 
     def mask(self, frame: np.ndarray) -> np.ndarray:
-        """The ``uint8`` 0/255 mask of in-range pixels of a BGR frame, speckle removed."""
+        """The ``uint8`` 0/255 mask of in-range pixels of a BGR frame, speckle removed.
+
+        Args:
+            frame (np.ndarray): ``H x W x 3`` uint8 BGR.
+        """
         hsv = cv2.cvtColor(frame, cv2.COLOR_BGR2HSV)
         mask = np.zeros(hsv.shape[:2], np.uint8)
         for hsv_range in self.hsv_ranges:
@@ -198,7 +262,11 @@ class ColorBlobDetector:
         return mask
 
     def detect(self, frame: np.ndarray) -> Blob | None:
-        """The largest in-range region of at least ``min_area`` pixels, or ``None``."""
+        """The largest in-range region of at least ``min_area`` pixels, or ``None``.
+
+        Args:
+            frame (np.ndarray): ``H x W x 3`` uint8 BGR.
+        """
         contours, _ = cv2.findContours(self.mask(frame), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         if not contours:
             return None
@@ -217,6 +285,22 @@ class CubeLocalization:
     ``position`` is the robot-frame cube centre (float32 ``[3]``), all NaN unless ``status`` is OK; the
     other fields are kept whatever the status, for the debug drawing. ``homography_kept`` says that fewer
     than 4 markers were seen and the homography is the one last fitted on at least 4 (the camera had not moved).
+
+    Args:
+        status (PerceptionStatus): the outcome.
+        position (np.ndarray): the cube centre, float32 ``[3]``.
+        marker_centres (dict): marker id -> pixel centre of the markers seen.
+        missing_markers (tuple of int): the calibrated markers not seen.
+        blob (Blob or None): the cube's colour region, if found.
+        homography (np.ndarray or None): pixel to table plane, if any.
+        homography_kept (bool, optional): the homography is the last one fitted. Defaults to ``False``.
+
+    Example:
+        >>> import numpy as np
+        >>> calibration = TableCalibration({0: (0.3, -0.3), 1: (0.3, 0.3), 2: (0.7, 0.3), 3: (0.7, -0.3)})
+        >>> seen = CubeLocator(calibration).locate(np.full((120, 160, 3), 255, np.uint8))
+        >>> seen.reason, seen.missing_markers, bool(np.isnan(seen.position).all())
+        ('markers', (0, 1, 2, 3), True)
     """
 
     status: PerceptionStatus
@@ -257,13 +341,21 @@ class CubeLocator:
     memory belongs to one camera: give each camera its own locator.
 
     Args:
-        calibration: the markers' robot-frame positions, dictionary and table height.
-        cube_size: cube edge in metres; the cube centre is half of it above the table.
-        blob_detector: how the cube is found; the default finds red.
-        marker_parameters: OpenCV ArUco detector parameters, see :class:`MarkerDetector`.
-        camera_moved_px: how far (pixels) a visible marker may lie from its position at the last fit before
-            the camera counts as moved; ``None`` never keeps a homography (every frame needs 4 markers).
-        min_markers_to_confirm: how many visible markers must confirm an unmoved camera.
+        calibration (TableCalibration): the markers' robot-frame positions, dictionary and table height.
+        cube_size (float, optional): cube edge in metres; the cube centre is half of it above the table.
+            Defaults to ``0.05``.
+        blob_detector (ColorBlobDetector, optional): how the cube is found; ``None`` finds red.
+            Defaults to ``None``.
+        marker_parameters (cv2.aruco.DetectorParameters, optional): OpenCV ArUco detector parameters, see
+            :class:`MarkerDetector`. Defaults to ``None``.
+        camera_moved_px (float, optional): how far (pixels) a visible marker may lie from its position at the
+            last fit before the camera counts as moved; ``None`` never keeps a homography (every frame needs
+            4 markers). Defaults to ``2.0``.
+        min_markers_to_confirm (int, optional): how many visible markers must confirm an unmoved camera.
+            Defaults to ``2``.
+
+    Raises:
+        ValueError: ``min_markers_to_confirm`` below 1.
 
     Examples:
         >>> from torchrl_cebp.sim2real.synthetic import render_table_scene
@@ -305,7 +397,11 @@ class CubeLocator:
         return homography
 
     def locate(self, frame: np.ndarray) -> CubeLocalization:
-        """Detects markers and cube in ``frame`` (H x W x 3 uint8 BGR) and maps the cube to the robot frame."""
+        """Detects markers and cube in ``frame`` and maps the cube to the robot frame.
+
+        Args:
+            frame (np.ndarray): ``H x W x 3`` uint8 BGR.
+        """
         markers = self.marker_detector.detect(frame)
         missing = tuple(i for i in self.calibration.marker_ids if i not in markers)
         visible = [i for i in self.calibration.marker_ids if i in markers]
@@ -340,11 +436,16 @@ class CubePerception(Transform):
     :class:`PerceptionStatus`: 0 ok, 1 markers missing, 2 cube not found).
 
     Args:
-        locator: the calibrated cube locator.
-        in_key: the image entry.
-        position_key, ok_key, status_key: the output entries.
-        channel_order: ``"bgr"`` for OpenCV camera frames (:mod:`torchrl_cebp.sim2real.camera`),
-            ``"rgb"`` for pixels rendered by simulators and gym envs.
+        locator (CubeLocator): the calibrated cube locator.
+        in_key (NestedKey, optional): the image entry. Defaults to ``"pixels"``.
+        position_key (NestedKey, optional): the cube position's entry. Defaults to ``"cube_position"``.
+        ok_key (NestedKey, optional): the success flag's entry. Defaults to ``"perception_ok"``.
+        status_key (NestedKey, optional): the status's entry. Defaults to ``"perception_status"``.
+        channel_order (str, optional): ``"bgr"`` for OpenCV camera frames (:mod:`torchrl_cebp.sim2real.camera`),
+            ``"rgb"`` for pixels rendered by simulators and gym envs. Defaults to ``"bgr"``.
+
+    Raises:
+        ValueError: another ``channel_order``.
 
     Examples:
         >>> import torch
@@ -407,6 +508,11 @@ class CubePerception(Transform):
         return self._call(tensordict_reset)
 
     def transform_observation_spec(self, observation_spec: Composite) -> Composite:
+        """Adds the three output entries' specs.
+
+        Args:
+            observation_spec (Composite): the env's observation spec.
+        """
         shape, device = observation_spec.shape, observation_spec.device
         position_key, ok_key, status_key = self.out_keys
         observation_spec[position_key] = Unbounded(shape=(*shape, 3), dtype=torch.float32, device=device)
@@ -426,6 +532,10 @@ def draw_perception(frame: np.ndarray, localization: CubeLocalization) -> np.nda
     Draws the workspace polygon through the visible marker centres, each marker centre with its id, the
     cube contour and centre with its robot-frame ``(x, y, z)``, and a status line naming any missing
     markers.
+
+    Args:
+        frame (np.ndarray): the frame that was perceived (``H x W x 3`` uint8 BGR).
+        localization (CubeLocalization): what :meth:`CubeLocator.locate` saw in it.
 
     Examples:
         >>> from torchrl_cebp.sim2real.synthetic import render_table_scene

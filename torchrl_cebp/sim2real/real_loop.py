@@ -29,13 +29,23 @@ __all__ = ["CameraView", "ParallaxCorrection", "RealLoopEnv", "SafetyStatus", "W
 
 
 class SafetyStatus(IntEnum):
-    """Why a step did (0) or did not move the robot; written as ``safety_status``."""
+    """Why a step did (0) or did not move the robot; written as ``safety_status``.
+
+    ``OK`` (0): the robot moved. ``MARKERS`` (1): no view perceives the cube, and the first camera lacks its
+    markers (see :class:`~torchrl_cebp.sim2real.PerceptionStatus`). ``CUBE`` (2): no view perceives the cube,
+    the first camera has its markers, and none is in the gripper. ``CAMERA_LOST`` (3): no frame; the robot
+    stopped and the episode is over. ``INVALID_ACTION`` (4): NaN or inf in the action.
+
+    Example:
+        >>> SafetyStatus(3).reason
+        'camera_lost'
+    """
 
     OK = 0
-    MARKERS = 1  # no view perceives the cube, and the first camera lacks its markers (see PerceptionStatus)
-    CUBE = 2  # no view perceives the cube, the first camera has its markers, and none is in the gripper
-    CAMERA_LOST = 3  # no frame: robot stopped, episode over
-    INVALID_ACTION = 4  # NaN or inf in the action
+    MARKERS = 1
+    CUBE = 2
+    CAMERA_LOST = 3
+    INVALID_ACTION = 4
 
     @property
     def reason(self) -> str:
@@ -50,6 +60,11 @@ class ParallaxCorrection:
     seen obliquely, its top and sides land further from the camera than the cube is. Along the camera
     ray the point at ``height`` lies ``1 - height / camera_z`` of the way from the camera to its
     table-plane image.
+
+    Args:
+        camera_position (tuple of float): the camera's robot-frame ``(x, y, z)``.
+        height (float): the height above the table of the point perceived (the cube's centre: half its edge).
+        table_height (float, optional): robot-frame ``z`` of the table surface. Defaults to ``0.0``.
 
     Example:
         >>> fix = ParallaxCorrection(camera_position=(1.0, 0.0, 1.0), height=0.5, table_height=0.0)
@@ -73,6 +88,10 @@ class ParallaxCorrection:
         Whatever its height, what the camera saw at ``position`` lies on that ray: a cube held off the table
         is on it, and a gripper far from it holds no cube the camera sees.
 
+        Args:
+            position (np.ndarray): a perceived table-plane position ``(x, y, ...)``.
+            point (np.ndarray): a robot-frame ``(x, y, z)``.
+
         Example:
             >>> fix = ParallaxCorrection(camera_position=(1.0, 0.0, 1.0), height=0.5, table_height=0.0)
             >>> fix.ray_distance(np.array([0.0, 0.0, 0.5]), np.array([0.5, 0.0, 0.5])), fix.ray_distance(np.array([0.0, 0.0, 0.5]), np.array([0.5, 0.2, 0.5]))
@@ -90,6 +109,12 @@ class CameraView:
     Each view needs its own :class:`~torchrl_cebp.sim2real.perception.CubeLocator`: the locator remembers its
     camera's last homography. Without a parallax correction (camera position unknown) a view's cube is not
     corrected for its height, and the view cannot overrule the in-gripper rule of :class:`RealLoopEnv`.
+
+    Args:
+        camera (FrameSource): the camera.
+        perception (CubePerception): the perception of its frames, with a locator of its own.
+        parallax (ParallaxCorrection, optional): the viewpoint's correction; ``None`` corrects nothing.
+            Defaults to ``None``.
 
     Example:
         >>> from torchrl_cebp.sim2real import CubeLocator
@@ -111,7 +136,17 @@ class CameraView:
         cls, camera: FrameSource, calibration: TableCalibration, camera_position: Sequence[float] | None = None
     ) -> CameraView:
         """The view of ``camera`` through a fresh locator of ``calibration``, parallax-corrected when the camera's
-        robot-frame position is known."""
+        robot-frame position is known.
+
+        Args:
+            camera (FrameSource): the camera.
+            calibration (TableCalibration): the table's markers.
+            camera_position (sequence of float, optional): the camera's robot-frame ``(x, y, z)``; ``None`` or
+                empty when unknown. Defaults to ``None``.
+
+        Raises:
+            ValueError: a position of other than 3 numbers.
+        """
         locator = CubeLocator(calibration)
         known = camera_position is not None and len(camera_position) > 0
         if known and len(camera_position) != 3:
@@ -125,6 +160,12 @@ def fetch_observation(state: RobotState, cube: np.ndarray, previous: tuple[Robot
 
     Velocities are per-step displacements, as Fetch multiplies them by the step time ``dt``; the cube's
     comes from the change since ``previous`` (zero on the first step) relative to the gripper's.
+
+    Args:
+        state (RobotState): the robot now.
+        cube (np.ndarray): the cube's robot-frame position.
+        previous (tuple or None): ``(state, cube)`` of the previous step; ``None`` on the first step.
+        dt (float): the simulator's step time.
 
     Example:
         >>> state = RobotState(np.zeros(3), np.zeros(3), np.full(2, 0.04), np.zeros(2))
@@ -167,15 +208,20 @@ class RealLoopEnv(EnvBase):
     from one camera rarely hides it from a second one placed elsewhere.
 
     Args:
-        backend: the robot.
-        camera: frame source (BGR).
-        perception: the calibrated cube perception (reads ``"pixels"``).
-        workspace: end-effector box and max step; ``None`` takes the layout's, the box the simulator trains in.
-        layout: goal space, success threshold, episode length and cube size (the Franka sim's).
-        parallax: optional correction of the perceived cube position for an oblique camera.
-        more_views: further cameras, each with its own perception and parallax correction.
-        goal: a fixed goal; ``None`` samples one per episode like the simulator.
-        dt: the simulator's step time, to scale velocities as Fetch does.
+        backend (RobotBackend): the robot.
+        camera (FrameSource): frame source (BGR).
+        perception (CubePerception): the calibrated cube perception (reads ``"pixels"``).
+        workspace (Workspace, optional): end-effector box and max step; ``None`` takes the layout's, the box
+            the simulator trains in. Defaults to ``None``.
+        layout (FrankaLayout, optional): goal space, success threshold, episode length and cube size.
+            Defaults to ``FrankaLayout()`` (the Franka sim's).
+        parallax (ParallaxCorrection, optional): correction of the perceived cube position for an oblique
+            camera. Defaults to ``None``.
+        goal (np.ndarray, optional): a fixed goal; ``None`` samples one per episode like the simulator.
+            Defaults to ``None``.
+        dt (float, optional): the simulator's step time, to scale velocities as Fetch does. Defaults to ``0.04``.
+        more_views (sequence of CameraView, optional): further cameras, each with its own perception and
+            parallax correction. Defaults to ``()``.
 
     Example:
         >>> from torchrl_cebp.sim2real import CubeLocator

@@ -37,18 +37,21 @@ def render_table_scene(
     """Renders the table with its markers and a red cube top face as a camera would see it.
 
     Args:
-        calibration: the markers (ids, robot-frame centres, dictionary) to paint.
-        cube_xy: robot-frame ``(x, y)`` of the cube centre; ``None`` paints no cube.
-        cube_size: cube edge, metres.
-        cube_yaw: cube rotation about the table normal, radians.
-        marker_size: printed marker edge (black border included), metres.
-        occluded_markers: ids painted over by a dark patch, as if a hand covered them.
-        image_size: ``(height, width)`` of the camera image.
-        table_corners_px: ``[4, 2]`` image pixels where the table rectangle's corners land (far-left,
-            far-right, near-right, near-left); the default is an oblique view from behind the table.
-        margin: table border around the markers, metres.
-        resolution: metres per pixel of the top-down painting.
-        table_bgr: table colour. cube_bgr: cube colour.
+        calibration (TableCalibration): the markers (ids, robot-frame centres, dictionary) to paint.
+        cube_xy (tuple of float or None): robot-frame ``(x, y)`` of the cube centre; ``None`` paints no cube.
+        cube_size (float, optional): cube edge, metres. Defaults to ``0.05``.
+        cube_yaw (float, optional): cube rotation about the table normal, radians. Defaults to ``0.0``.
+        marker_size (float, optional): printed marker edge (black border included), metres. Defaults to ``0.08``.
+        occluded_markers (sequence of int, optional): ids painted over by a dark patch, as if a hand covered
+            them. Defaults to ``()``.
+        image_size (tuple of int, optional): ``(height, width)`` of the camera image. Defaults to ``(480, 640)``.
+        table_corners_px (np.ndarray, optional): ``[4, 2]`` image pixels where the table rectangle's corners
+            land (far-left, far-right, near-right, near-left); ``None`` is an oblique view from behind the
+            table. Defaults to ``None``.
+        margin (float, optional): table border around the markers, metres. Defaults to ``0.1``.
+        resolution (float, optional): metres per pixel of the top-down painting. Defaults to ``1e-3``.
+        table_bgr (tuple of int, optional): table colour. Defaults to ``(170, 190, 200)``.
+        cube_bgr (tuple of int, optional): cube colour. Defaults to ``(30, 30, 200)``.
 
     Returns:
         An ``image_size + (3,)`` uint8 BGR frame.

@@ -39,7 +39,17 @@ _QUIET_ZONE = 1.4
 
 
 def marker_texture(dictionary: str, marker_id: int, pixels: int = 140, cache_dir: str | Path | None = None) -> Path:
-    """A PNG of marker ``marker_id`` with a white quiet zone, written once to ``cache_dir`` (default: the temp dir).
+    """A PNG of marker ``marker_id`` with a white quiet zone, written once to ``cache_dir``.
+
+    Args:
+        dictionary (str): the predefined ArUco dictionary's name.
+        marker_id (int): the marker.
+        pixels (int, optional): the PNG's side, quiet zone included. Defaults to ``140``.
+        cache_dir (str or Path, optional): where the PNG is kept; ``None`` is a folder in the temp dir.
+            Defaults to ``None``.
+
+    Returns:
+        the PNG's path.
 
     Example:
         >>> import cv2
@@ -79,12 +89,17 @@ class TwinScene:
     for a loop that must see the cube while the gripper hides it from the first.
 
     Args:
-        calibration: marker ids and robot-frame centres (``table_height`` is the table top).
-        marker_size: printed marker edge, black border included, metres.
-        camera_pos, camera_target: where the main camera is and what it looks at (robot frame).
-        side_camera_pos, side_camera_target: the same for the side camera.
-        fovy: vertical field of view, degrees.
-        image_size: ``(height, width)`` of the rendered frames.
+        calibration (TableCalibration, optional): marker ids and robot-frame centres (``table_height`` is the
+            table top). Defaults to ``TWIN_CALIBRATION``.
+        marker_size (float, optional): printed marker edge, black border included, metres. Defaults to ``0.08``.
+        camera_pos (tuple of float, optional): where the main camera is (robot frame).
+            Defaults to ``(1.25, 0.0, 0.95)``.
+        camera_target (tuple of float, optional): what the main camera looks at. Defaults to ``(0.5, 0.0, 0.0)``.
+        side_camera_pos (tuple of float, optional): where the side camera is. Defaults to ``(0.5, -0.85, 1.0)``.
+        side_camera_target (tuple of float, optional): what the side camera looks at.
+            Defaults to ``(0.55, 0.0, 0.0)``.
+        fovy (float, optional): vertical field of view, degrees. Defaults to ``50.0``.
+        image_size (tuple of int, optional): ``(height, width)`` of the rendered frames. Defaults to ``(360, 480)``.
 
     Example:
         >>> env = FrankaPickPlaceEnv(scene_hook=TwinScene(TWIN_CALIBRATION))
@@ -113,7 +128,14 @@ class TwinScene:
         self.image_size = image_size
 
     def camera_position(self, name: str) -> np.ndarray:
-        """Where camera ``name`` (:data:`CAMERA_NAME` or :data:`SIDE_CAMERA_NAME`) is, in the robot frame."""
+        """Where camera ``name`` is, in the robot frame.
+
+        Args:
+            name (str): :data:`CAMERA_NAME` or :data:`SIDE_CAMERA_NAME`.
+
+        Raises:
+            ValueError: another name.
+        """
         positions = {CAMERA_NAME: self.camera_pos, SIDE_CAMERA_NAME: self.side_camera_pos}
         if name not in positions:
             raise ValueError(f"The twin has no camera {name!r}; its cameras: {', '.join(positions)}.")
@@ -148,9 +170,10 @@ class MuJoCoTwinBackend(RobotBackend):
     until :meth:`reset`, as a real robot after a stop would.
 
     Args:
-        scene: markers and camera.
-        layout: the Franka scene geometry.
-        seed: seeds the cube placement.
+        scene (TwinScene, optional): markers and cameras; ``None`` is ``TwinScene()``. Defaults to ``None``.
+        layout (FrankaLayout, optional): the Franka scene geometry. Defaults to ``FrankaLayout()``.
+        seed (int, optional): seeds the first episode's cube placement; ``None`` leaves it unseeded.
+            Defaults to ``None``.
 
     Example:
         >>> backend = MuJoCoTwinBackend(seed=0)
@@ -185,12 +208,14 @@ class MuJoCoTwinBackend(RobotBackend):
         return TableCalibration(positions, self.scene.calibration.aruco_dictionary, self.layout.table_height)
 
     def reset(self) -> None:
+        """Resets the simulation: the arm to its start pose, gripper open, the cube to its next placement."""
         self.env.reset(seed=self._seed)
         self._seed = None  # seeds the first episode only; later ones continue the stream
         self._gripper = 1.0
         self.stopped = False
 
     def state(self) -> RobotState:
+        """The simulated grip point's and fingers' positions and velocities."""
         obs = self.env._get_obs()["observation"]
         dt = self.env.dt
         # Fetch's observation stores velocities multiplied by the step time.
@@ -202,6 +227,15 @@ class MuJoCoTwinBackend(RobotBackend):
         )
 
     def move(self, delta_xyz: np.ndarray, gripper: float) -> None:
+        """One simulator step towards ``delta_xyz`` with the gripper command.
+
+        Args:
+            delta_xyz (np.ndarray): the robot-frame displacement, at most :attr:`max_step` per axis.
+            gripper (float): ``+1`` opens fully, ``-1`` closes.
+
+        Raises:
+            RuntimeError: the twin was stopped and not reset since.
+        """
         if self.stopped:
             raise RuntimeError("The twin robot was stopped; reset() it before moving again.")
         self._gripper = float(gripper)
@@ -209,10 +243,12 @@ class MuJoCoTwinBackend(RobotBackend):
         self.env.step(action.astype(np.float32))
 
     def hold(self) -> None:
+        """One simulator step that stays put with the last gripper command (nothing once stopped)."""
         if not self.stopped:
             self.env.step(np.array([0.0, 0.0, 0.0, self._gripper], np.float32))
 
     def stop(self) -> None:
+        """Refuses every :meth:`move` until :meth:`reset`."""
         self.stopped = True
 
     @torch.no_grad()
@@ -221,7 +257,12 @@ class MuJoCoTwinBackend(RobotBackend):
 
         Resets like :meth:`reset` (the next cube placement of the seed's stream), so a second backend with
         the seed of a camera loop's replays that loop's episodes on the same cube placements and goals.
-        Returns whether the cube ends within the success threshold of ``goal``, as the camera loop scores it.
+        Args:
+            policy (TensorDictModuleBase): reads ``"observation"`` and ``"desired_goal"``, writes ``"action"``.
+            goal (np.ndarray): the goal ``[x, y, z]``.
+
+        Returns:
+            whether the cube ends within the success threshold of ``goal``, as the camera loop scores it.
 
         Example:
             >>> from torchrl_cebp.sim2real import ScriptedPickPlace
@@ -251,8 +292,9 @@ class TwinCamera(FrameSource):
     """Renders one of the twin's fixed cameras: BGR frames, like :class:`~torchrl_cebp.sim2real.camera.OpenCVCamera`'s.
 
     Args:
-        backend: the twin.
-        name: :data:`CAMERA_NAME` (the main camera) or :data:`SIDE_CAMERA_NAME`.
+        backend (MuJoCoTwinBackend): the twin.
+        name (str, optional): :data:`CAMERA_NAME` (the main camera) or :data:`SIDE_CAMERA_NAME`.
+            Defaults to ``CAMERA_NAME``.
 
     Example:
         >>> backend = MuJoCoTwinBackend(seed=0)
@@ -282,6 +324,7 @@ class TwinCamera(FrameSource):
         return cv2.cvtColor(self._renderer.render(), cv2.COLOR_RGB2BGR)
 
     def close(self) -> None:
+        """Frees the renderer."""
         self._renderer.close()
 
     def __repr__(self) -> str:

@@ -33,7 +33,16 @@ def make_policy(
 ) -> tuple[TensorDictSequential, TensorDictSequential]:
     """The deterministic policy (normaliser, actor) and the same modules followed by :class:`HERExploration`.
 
-    ``exploration`` goes to :class:`HERExploration` (``random_eps``, ``noise_std``, ``generator``).
+    Args:
+        obs_dim (int): the observation size.
+        goal_dim (int): the goal size.
+        action_dim (int): the action size.
+        hidden (list of int): the actor's hidden layers' widths.
+        **exploration: passed to :class:`~torchrl_cebp.agents.HERExploration` (``random_eps``,
+            ``noise_std``, ``generator``).
+
+    Returns:
+        ``(policy, exploration_policy)``, sharing one set of weights.
 
     Examples:
         >>> policy, explore = make_policy(25, 3, 4, [32])
@@ -55,11 +64,22 @@ def make_collector(
 ) -> BaseCollector:
     """A TorchRL collector of whole episodes: ``n_envs`` envs of ``episode_steps`` steps per batch.
 
-    ``make_env(k)`` builds a batched env of ``k`` simulations (picklable with ``processes`` > 0).
-    ``processes=0`` steps them in this process; ``processes=n`` gives each of ``n`` env processes
+    ``processes=0`` steps the envs in this process; ``processes=n`` gives each of ``n`` env processes
     ``n_envs / n`` of them (a :class:`~torchrl.collectors.MultiSyncCollector`, whose weights follow
     the policy at :meth:`~torchrl.collectors.BaseCollector.update_policy_weights_`). Give it a copy of
     the trained policy when the training changes it while a batch is collected (:class:`EpisodeBatches`).
+
+    Args:
+        make_env (callable): ``make_env(k)`` builds a batched env of ``k`` simulations (picklable with
+            ``processes`` > 0).
+        policy (TensorDictSequential): the exploration policy.
+        n_envs (int): episodes per batch (keyword only).
+        episode_steps (int): steps per episode (keyword only).
+        processes (int, optional): env processes; ``0`` steps the envs in this process (keyword only).
+            Defaults to ``0``.
+
+    Raises:
+        ValueError: ``processes`` does not divide ``n_envs``.
 
     Example:
         >>> import functools
@@ -107,6 +127,11 @@ class EpisodeBatches:
     the collector's bookkeeping keys. With ``background=True`` the batch is collected in a thread
     meanwhile; :meth:`busy` says whether it still is.
 
+    Args:
+        collector (BaseCollector): a collector of :func:`make_collector`, with its own copy of ``policy``.
+        policy (TensorDictSequential): the trained exploration policy, holding a
+            :class:`~torchrl_cebp.agents.HERExploration`.
+
     Example:
         >>> import copy
         >>> from torchrl_cebp.envs import make_env
@@ -128,6 +153,17 @@ class EpisodeBatches:
         self._pending: Future | None = None
 
     def request(self, seed: int | None = None, *, background: bool = False) -> None:
+        """Starts collecting one batch with ``policy``'s current weights.
+
+        Args:
+            seed (int, optional): restarts the envs' and the exploration's streams; ``None`` goes on with them.
+                Defaults to ``None``.
+            background (bool, optional): collect in a thread and return at once (keyword only).
+                Defaults to ``False``.
+
+        Raises:
+            RuntimeError: the previous batch's :meth:`result` has not been taken.
+        """
         if self._pending is not None:
             raise RuntimeError("request() before the previous batch's result()")
         if seed is not None:
@@ -152,12 +188,18 @@ class EpisodeBatches:
         return self._pending is not None and not self._pending.done()
 
     def result(self) -> TensorDictBase:
+        """The requested batch ``[n_envs, T]``, waiting for it if it is collected in the background.
+
+        Raises:
+            RuntimeError: nothing was requested; or the error the collection raised.
+        """
         if self._pending is None:
             raise RuntimeError("result() without a request()")
         pending, self._pending = self._pending, None
         return pending.result()
 
     def close(self) -> None:
+        """Waits for a background batch, then shuts the collector down."""
         if self._pending is not None:
             self._pending.exception()  # let a background batch finish before the processes go
         self.collector.shutdown()

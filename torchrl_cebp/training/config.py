@@ -29,6 +29,9 @@ def env_label(env: DictConfig) -> str:
     then ``-T<steps>`` when the episode length is set (``env.episode_steps``), then ``-grasped<percent>`` when
     training episodes start grasped (``env.grasped_start``).
 
+    Args:
+        env (DictConfig): the env config.
+
     Examples:
         >>> from omegaconf import OmegaConf
         >>> env_label(OmegaConf.create({"task": "push", "goal_space": "extended", "control": "joint",
@@ -60,6 +63,11 @@ def replay_label(workers: int, per_worker: bool, strategy: str = "future") -> st
 
     Runs of the merged buffer and of ``future`` keep the folders they had before these options existed.
 
+    Args:
+        workers (int): the number of emulated workers.
+        per_worker (bool): each worker replays from its own buffer.
+        strategy (str, optional): the HER relabelling strategy. Defaults to ``"future"``.
+
     Examples:
         >>> replay_label(8, True), replay_label(8, False), replay_label(1, True), replay_label(8, True, "past")
         ('-per_worker', '', '', '-per_worker-her_past')
@@ -72,7 +80,16 @@ if not OmegaConf.has_resolver("replay_label"):
 
 
 class ConfigError(ValueError):
-    """A config value outside its allowed range or set."""
+    """A config value outside its allowed range or set.
+
+    Example:
+        >>> from omegaconf import OmegaConf
+        >>> try:
+        ...     validate_config(OmegaConf.create({"seed": -1}))
+        ... except ConfigError as err:
+        ...     print(isinstance(err, ValueError), "seed=-1" in str(err))
+        True True
+    """
 
 
 def _is_int(value) -> bool:
@@ -85,6 +102,12 @@ def _is_real(value) -> bool:
 
 def validate_config(cfg: DictConfig) -> None:
     """Raises :class:`ConfigError` listing every invalid value of ``cfg`` and what is allowed.
+
+    Args:
+        cfg (DictConfig): the composed training config (``conf/config.yaml``).
+
+    Raises:
+        ConfigError: one line per invalid value.
 
     Examples:
         >>> from omegaconf import OmegaConf
@@ -188,14 +211,30 @@ def _collection_errors(cfg: DictConfig) -> list[str]:
 
 
 def resolve_device(name: str) -> torch.device:
-    """``"auto"`` is CUDA when available, else the CPU."""
+    """The device ``name`` means: ``"auto"`` is CUDA when available, else the CPU.
+
+    Args:
+        name (str): ``"auto"``, ``"cpu"`` or ``"cuda"``.
+
+    Example:
+        >>> resolve_device("cpu")
+        device(type='cpu')
+    """
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     return torch.device(name)
 
 
 def warn_if_bf16_is_emulated(precision: str, device: torch.device) -> None:
-    """Warns when ``precision=bf16`` would run on a CPU without bfloat16 instructions (slower than fp32)."""
+    """Warns when ``precision=bf16`` would run on a CPU without bfloat16 instructions (slower than fp32).
+
+    Args:
+        precision (str): ``"fp32"`` or ``"bf16"``.
+        device (torch.device): where the updates run.
+
+    Example:
+        >>> warn_if_bf16_is_emulated("fp32", torch.device("cpu"))  # fp32 never warns
+    """
     if precision != "bf16" or device.type != "cpu":
         return
     if not (torch.cpu._is_avx512_bf16_supported() or torch.cpu._is_amx_tile_supported()):
@@ -225,6 +264,9 @@ LEGACY_DEFAULTS: dict[tuple[str, str], object] = {
 def with_legacy_defaults(saved: dict) -> dict:
     """A checkpoint's config with the keys added since it was made, set to what that run did.
 
+    Args:
+        saved (dict): the config saved in a checkpoint.
+
     Example:
         >>> with_legacy_defaults({"replay": {"capacity": 10}})["replay"]
         {'capacity': 10, 'per_worker': False, 'capacity_per': 'total'}
@@ -247,6 +289,13 @@ def check_same_run(saved: dict, cfg: DictConfig) -> None:
     """Raises :class:`ConfigError` when ``cfg`` differs from a checkpoint's config in a run-defining key.
 
     The error names each differing setting by its dotted path, as a Hydra override would.
+
+    Args:
+        saved (dict): the config saved in the checkpoint.
+        cfg (DictConfig): the config of the run that resumes it.
+
+    Raises:
+        ConfigError: one clause per differing setting, with a hint where a new default explains it.
 
     Examples:
         >>> from omegaconf import OmegaConf

@@ -14,6 +14,11 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 def evaluate_success_rate(env: EnvBase, policy: TensorDictSequential, n_episodes: int) -> float:
     """Success at the last step of ``n_episodes`` deterministic episodes on the batched ``env``, as a fraction.
 
+    Args:
+        env (EnvBase): a batched env (batch size ``[n]``); it runs ``ceil(n_episodes / n)`` rollouts.
+        policy (TensorDictSequential): the policy, run under ``ExplorationType.DETERMINISTIC``.
+        n_episodes (int): how many episodes count.
+
     Example:
         >>> from torchrl_cebp.envs import make_env
         >>> from torchrl_cebp.training.collection import make_policy

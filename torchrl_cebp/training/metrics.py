@@ -22,6 +22,13 @@ def make_logger(kind: str, run_dir: str | Path) -> Logger | None:
     ``tensorboard`` needs the ``tensorboard`` package, ``wandb`` and ``mlflow`` theirs
     (``pip install torchrl-cebp[loggers]``); set ``WANDB_MODE=offline`` to log W&B without a network.
 
+    Args:
+        kind (str): one of ``"none"``, ``"tensorboard"``, ``"wandb"``, ``"mlflow"``.
+        run_dir (str or Path): the run's folder; its name is the experiment's.
+
+    Raises:
+        ValueError: an unknown ``kind``.
+
     Examples:
         >>> import tempfile
         >>> with tempfile.TemporaryDirectory() as d:
@@ -50,6 +57,10 @@ def code_version(checkout: str | Path | None = None) -> str:
     Read once per process (and ``checkout``): the runs of an in-process sweep keep running the code the
     process loaded, whatever later commits move the checkout's HEAD to.
 
+    Args:
+        checkout (str or Path, optional): the git checkout; ``None`` is the one the package lives in.
+            Defaults to ``None``.
+
     Example:
         >>> len(code_version()) > 0
         True
@@ -75,6 +86,11 @@ class EpochCsv:
     Rows are flushed at once, so the file is complete up to the last finished epoch.
     When resuming, rows of epochs at or after ``start_epoch`` (written after the last
     checkpoint) are dropped first.
+
+    Args:
+        path (str or Path): the CSV file.
+        start_epoch (int, optional): the first epoch this run writes; ``0`` starts a new file.
+            Defaults to ``0``.
 
     Examples:
         >>> import tempfile, pathlib
@@ -107,6 +123,11 @@ class EpochCsv:
             writer.writerows(rows)
 
     def write(self, row: dict[str, Any]) -> None:
+        """Appends ``row``; columns it adds are added to the header, empty in earlier rows.
+
+        Args:
+            row (dict): column name to value.
+        """
         if self._fields is None:
             self._fields = list(row)
             self._rewrite([])
@@ -125,6 +146,13 @@ class EpochLog:
 
     Every CSV row names the code's commit and the instruction set torch's CPU kernels dispatched to (``AVX512``,
     ``AVX2``, ...) it ran on.
+
+    Args:
+        run_dir (str or Path): the run's folder.
+        start_epoch (int): the first epoch this run writes (see :class:`EpochCsv`).
+        logger (str): the TorchRL logger (:func:`make_logger`).
+        labels (dict, optional): text columns written in every CSV row and never logged as scalars.
+            Defaults to ``None``.
 
     Example:
         >>> import tempfile, pathlib
@@ -148,6 +176,12 @@ class EpochLog:
         }
 
     def write(self, epoch: int, row: dict[str, float]) -> None:
+        """Writes ``row`` for ``epoch`` to the CSV and its scalars to the logger.
+
+        Args:
+            epoch (int): the epoch.
+            row (dict): metric name to value.
+        """
         self._csv.write({"epoch": epoch, **row, **self._labels})
         if self._logger is not None:
             for key, value in row.items():
