@@ -10,16 +10,22 @@ pick_place_released,push_released,slide_released}, sampler={her,per,ebp,mep,cper
 cebp_initial}, preset={default,quick,paper}, +comparison=<stage> (conf/comparison/).
 """
 
+import sys
+
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from torchrl_cebp.training import train
+from torchrl_cebp.training.checkpoint import UnreadableFileError
 
 
 @hydra.main(config_path="conf", config_name="config", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    csv_path = train(cfg, HydraConfig.get().runtime.output_dir)
+    try:
+        csv_path = train(cfg, HydraConfig.get().runtime.output_dir)
+    except UnreadableFileError as error:  # no checkpoint of the run loads: a message, not a stack trace
+        sys.exit(f"error: {error}")
     print(f"per-epoch results: {csv_path}")
 
 

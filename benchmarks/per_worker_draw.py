@@ -2,7 +2,7 @@
 
 The paper-scale draw (``workers=8``, ``batch_size=256``) with HER relabelling, over a buffer of FetchPush-shaped
 episodes written 16 at a time as the trainer writes them, for uniform HER, the Initial commit's CEBP and PER (whose
-draw includes feeding the batch's TD errors back, ``update_td_priorities``, as the trainer does). The two
+draw includes feeding the batch's TD errors back, ``rb.update_tensordict_priority``, as the trainer does). The two
 layouts are timed in alternation, ``--rounds`` times ``--draws`` draws each, and the median of each is printed with
 their ratio. A draw (with PER's priority update) is the only part of a training epoch whose code differs between the
 layouts (2,000 of them per epoch): ``benchmarks/training.py --methods ours_merged:1 ours:1`` times the whole epoch.
@@ -32,8 +32,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
 
-    from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer, update_td_priorities
-    from torchrl_cebp.samplers import InitialCEBPSampler, PERSampler, PerWorkerSampler, UniformEpisodeSampler
+    from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+    from torchrl_cebp.replay.samplers import InitialCEBPSampler, PERSampler, PerWorkerSampler, UniformEpisodeSampler
 
     push = OmegaConf.load(Path(__file__).parents[1] / "conf" / "env" / "push.yaml")
     workspace = tuple(map(tuple, push.gripper_workspace))
@@ -66,7 +66,7 @@ def main() -> None:
                 for _ in range(args.draws):
                     batch = rb.sample()
                     batch["td_error"] = td_errors  # fed back to PER only
-                    update_td_priorities(rb, batch)
+                    rb.update_tensordict_priority(batch)
                 times[layout].append((time.perf_counter() - tick) / args.draws * 1e3)
         merged, per_worker = (statistics.median(times[layout]) for layout in ("merged", "per_worker"))
         print(f"{name:13s} merged {merged:7.2f} ms   per-worker {per_worker:7.2f} ms   ratio {per_worker / merged:.2f}x   "

@@ -67,7 +67,7 @@ def measure(draw: Draw, write: Write, repeats: int) -> Timing:
 def _our_methods() -> dict[str, Builder]:
     """Our samplers behind ``make_replay_buffer``; empty (with a note) while the package lacks them."""
     try:
-        from torchrl_cebp import samplers
+        from torchrl_cebp.replay import samplers
         from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
     except ImportError as err:
         print(f"note: our samplers are skipped, torchrl_cebp is not importable ({err})")
@@ -116,7 +116,7 @@ def _our_methods() -> dict[str, Builder]:
         if hasattr(samplers, cls_name):
             methods[name] = builder(cls_name, kwargs)
         else:
-            print(f"note: {name} is skipped, torchrl_cebp.samplers has no {cls_name}")
+            print(f"note: {name} is skipped, torchrl_cebp.replay.samplers has no {cls_name}")
     return methods
 
 
@@ -152,12 +152,15 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, nargs="+", default=[2000, 20000], help="stored 50-step episodes")
     parser.add_argument("--repeats", type=int, default=200, help="timed draws (and writes) per median")
     parser.add_argument("--peers-only", action="store_true", help="skip our samplers")
+    parser.add_argument("--peers", nargs="+", choices=list(PEERS), default=list(PEERS),
+                        help="the peers to time beside ours (sb3_her needs the bench extra)")
     args = parser.parse_args()
 
     # Shared 2-core machines: more threads only add contention, and the peers' reference runs used 1.
     torch.set_num_threads(1)
-    require_stable_baselines3()
-    methods: dict[str, Builder] = dict(PEERS)
+    if "sb3_her" in args.peers:
+        require_stable_baselines3()
+    methods: dict[str, Builder] = {name: PEERS[name] for name in args.peers}
     if not args.peers_only:
         methods.update(_our_methods())
 

@@ -52,7 +52,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--buffer-size", type=int, default=1_000_000, help="capacity in transitions")
     parser.add_argument("--refit-frames", type=int, default=5_000,
                         help="frames between MEP's refits of its density model (HER's epoch at two envs)")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    for name in ("envs", "frames_per_batch", "total_frames", "batch_size", "buffer_size", "refit_frames"):
+        if getattr(args, name) <= 0:  # a collector of no frames would end at once, having printed nothing
+            parser.error(f"--{name.replace('_', '-')}={getattr(args, name)}: must be a positive integer")
+    if args.utd_ratio < 0:
+        parser.error(f"--utd-ratio={args.utd_ratio}: must be 0 or more")
+    return args
 
 
 def project_config(args: argparse.Namespace) -> DictConfig:

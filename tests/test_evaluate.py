@@ -5,51 +5,106 @@ import pytest
 import torch
 from tensordict import TensorDict
 
-from tests.training.test_training import config
+from tests.tiny_run import config, copy_run
+from torchrl_cebp.envs import make_franka, make_touch_fetch
 from torchrl_cebp.evaluate import main, record_video, success_rate
-from torchrl_cebp.envs import make_touch_fetch
+from torchrl_cebp.sim2real import SHIPPED_POLICY
 from torchrl_cebp.training import load_policy, train
+from torchrl_cebp.training.checkpoint import POLICY_NAME, UnreadableFileError
 
 
-@pytest.fixture(scope="module")
-def run_dir(tmp_path_factory):
-    run = tmp_path_factory.mktemp("run")
-    train(config("sampler=her", "env=push", "epochs=1"), run)
-    return run
-
-
-def test_success_rate_over_n_episodes(run_dir, capsys):
-    main([str(run_dir), "--episodes", "2"])
-    assert "success rate over 2 episodes" in capsys.readouterr().out
-
-
-def test_success_rate_on_the_checkpoints_own_robot_equals_a_plain_gymnasium_loop(tmp_path):
-    # The released code's robot (7-D actions): the evaluation must rebuild it from the checkpoint.
-    train(config("sampler=her", "env=push_released", "epochs=1"), tmp_path)
-    policy = load_policy(tmp_path)
+def plain_gymnasium_success_rate(policy, make_env, seeds) -> float:
+    """The success rate of ``policy`` over one gymnasium episode per seed, stepped by hand (no TorchRL env)."""
     successes = []
-    for i in range(4):
-        env = make_touch_fetch("push", "extended", control="joint", touch_ignores_table=True)
-        obs, _ = env.reset(seed=1234 + i)  # success_rate seeds simulation i with seed + i
+    for seed in seeds:
+        env = make_env()
+        obs, _ = env.reset(seed=seed)
         for _ in range(env.max_episode_steps):
             td = TensorDict({key: torch.as_tensor(obs[key], dtype=torch.float32) for key in ("observation", "desired_goal")})
             with torch.no_grad():
                 action = policy(td)["action"].numpy()
             obs, _, _, _, info = env.step(action)
         successes.append(float(info["is_success"]))
-    assert success_rate(tmp_path, episodes=4, seed=1234) == pytest.approx(np.mean(successes))
+    return float(np.mean(successes))
+
+
+def test_the_command_prints_the_success_rate_a_plain_loop_measures(capsys):
+    # The shipped Franka policy (50-step episodes, as it trained): a rate that is not trivially 0.
+    main([str(SHIPPED_POLICY), "--episodes", "4"])  # success_rate seeds simulation i with 1234 + i
+    expected = plain_gymnasium_success_rate(
+        load_policy(SHIPPED_POLICY), lambda: make_franka(max_episode_steps=50), range(1234, 1238))
+    assert capsys.readouterr().out == f"success rate over 4 episodes: {expected:.3f}\n"
+    assert expected >= 0.75  # the shipped policy places the cube
+
+
+def test_success_rate_on_the_checkpoints_own_robot_equals_a_plain_gymnasium_loop(tmp_path):
+    # The released code's robot (7-D actions): the evaluation must rebuild it from the checkpoint.
+    train(config("sampler=her", "env=push_released", "epochs=1"), tmp_path)
+    expected = plain_gymnasium_success_rate(
+        load_policy(tmp_path),
+        lambda: make_touch_fetch("push", "extended", control="joint", touch_ignores_table=True),
+        range(1234, 1238),
+    )
+    assert success_rate(tmp_path, episodes=4, seed=1234) == pytest.approx(expected)
 
 
 @pytest.mark.parametrize("suffix", [".gif", ".mp4"])
-def test_video_has_one_frame_per_step(run_dir, tmp_path, suffix):
-    path = record_video(run_dir, tmp_path / f"episode{suffix}", episodes=1, size=(64, 48))
+def test_video_has_one_frame_per_step(tiny_run, tmp_path, suffix):
+    path = record_video(tiny_run, tmp_path / f"episode{suffix}", episodes=1, size=(64, 48))
     frames = iio.imread(path)
     assert frames.shape[0] == 51 and frames.shape[1:3] == (48, 64)
     assert frames.std() > 5  # a rendered scene, not a blank frame
 
 
-def test_bad_video_format_and_missing_checkpoint(run_dir, tmp_path):
+def test_bad_video_format_and_missing_checkpoint(tiny_run, tmp_path):
     with pytest.raises(ValueError, match="'.avi'.*mp4.*gif"):
-        record_video(run_dir, tmp_path / "x.avi")
-    with pytest.raises(FileNotFoundError):
+        record_video(tiny_run, tmp_path / "x.avi")
+    with pytest.raises(FileNotFoundError, match="No policy at .*nowhere"):
         success_rate(tmp_path / "nowhere")
+
+
+def _truncated(path):
+    path.write_bytes(path.read_bytes()[:1000])
+
+
+def _empty(path):
+    path.write_bytes(b"")
+
+
+def _a_module(path):
+    torch.save(torch.nn.Linear(2, 2), path)
+
+
+def _a_tensor(path):
+    torch.save(torch.ones(3), path)
+
+
+def _other_weights(path):
+    torch.save({"weights": torch.ones(3)}, path)
+
+
+def _other_sizes(path):
+    state = torch.load(path, weights_only=True)
+    torch.save({**state, "hidden": [64, 64]}, path)  # the tiny run's actor is 32 x 32
+
+
+POLICY_DAMAGE = {
+    _truncated: r"does not load: it is not a complete file of torch\.save \(1000 bytes: truncated, or another format\)",
+    _empty: r"does not load: it is empty \(0 bytes\)",
+    _a_module: r"does not load: it holds a pickled torch\.nn\.modules\.linear\.Linear, not only tensors",
+    _a_tensor: r"is neither a policy file nor a training checkpoint: it holds a Tensor, not a dict",
+    _other_weights: r"is neither a policy file nor a training checkpoint: it lacks \['config', 'loss', 'normalizer'\]",
+    _other_sizes: r"does not hold a whole policy: RuntimeError: Error\(s\) in loading state_dict .* size mismatch for ",
+}
+
+
+@pytest.mark.parametrize("damage", POLICY_DAMAGE, ids=lambda damage: damage.__name__.strip("_"))
+def test_a_damaged_or_foreign_policy_file_is_named_with_what_is_wrong(tiny_run, tmp_path, capsys, damage):
+    policy_file = copy_run(tiny_run, tmp_path / "run") / POLICY_NAME
+    damage(policy_file)
+    with pytest.raises(UnreadableFileError, match=f"^{policy_file} {POLICY_DAMAGE[damage]}"):
+        load_policy(policy_file)
+    with pytest.raises(SystemExit) as exit_info:
+        main([str(policy_file.parent)])  # the run directory: read from its policy.pt
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and err.count("\n") == 1 and err.startswith(f"error: {policy_file} ")

@@ -8,6 +8,7 @@ from pathlib import Path
 import torchrl  # noqa: F401  (it sets its logger's level on import: import it before quieting it)
 
 README = Path(__file__).parents[1] / "README.md"
+TRAINING_PAGE = Path(__file__).parents[1] / "docs" / "training.md"  # the distributed collector example lives there
 
 
 def test_the_readme_sampler_example_runs_as_written():
@@ -23,7 +24,7 @@ def test_the_readme_sampler_example_runs_as_written():
 
 
 def test_the_readme_distributed_collector_example_runs_on_local_processes():
-    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.DOTALL)
+    blocks = re.findall(r"```python\n(.*?)```", TRAINING_PAGE.read_text(), flags=re.DOTALL)
     example = next(block for block in blocks if "DistributedSyncCollector(" in block)
     with socket.socket() as probe:  # a free port for the collector's process group
         probe.bind(("127.0.0.1", 0))

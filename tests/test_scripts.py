@@ -19,6 +19,8 @@ from tests.modules import load_module
 from torchrl_cebp.training.config import validate_config
 
 REPO = Path(__file__).resolve().parents[1]
+# The experiments' own tooling, not the library: run with -m bookkeeping (.ci/run does).
+pytestmark = pytest.mark.bookkeeping
 
 
 def queued_runs(*overrides: str) -> list[list[str]]:
@@ -32,19 +34,27 @@ def queued_runs(*overrides: str) -> list[list[str]]:
 def test_run_comparison_queues_one_valid_run_per_stage_and_seed():
     runs = queued_runs()
     assert sorted(queued_runs("epochs=1")) == sorted([*run, "epochs=1"] for run in runs)  # overrides reach every run
-    seeds = [next(o for o in run if o.startswith("seed=")) for run in runs]
     assert all(sum(o.startswith("seed=") for o in run) == 1 for run in runs)
-    stages = Counter(" ".join(o for o in run if not o.startswith("seed=")) for run in runs)
+    # The shipped agents' runs carry a comparison run on past its horizon: they alone set their epochs.
+    agents = [run for run in runs if any(o.startswith("epochs=") for o in run)]
+    stage_runs = [run for run in runs if run not in agents]
+    seeds = [next(o for o in run if o.startswith("seed=")) for run in stage_runs]
+    stages = Counter(" ".join(o for o in run if not o.startswith("seed=")) for run in stage_runs)
     assert set(stages.values()) == {3} and Counter(seeds) == {f"seed={s}": len(stages) for s in range(3)}
-    folders = []
+    assert len(agents) == 2 and all("seed=0" in run for run in agents)
+    folders, epochs = {}, {}
     with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
         for run in runs:
             cfg = compose("config", overrides=run, return_hydra_config=True)
             validate_config(cfg)  # every stage and sampler exists, every value is allowed
             HydraConfig.instance().set_config(cfg)  # the folder's name reads hydra:runtime.choices
-            folders.append(cfg.hydra.run.dir)
+            folders[" ".join(run)], epochs[" ".join(run)] = cfg.hydra.run.dir, cfg.epochs
+    stage_folders = [folders[" ".join(run)] for run in stage_runs]
     # A stage that differs from another by a sampler value alone must name its own folder, or it resumes the other's.
-    assert len(set(folders)) == len(runs), Counter(folders).most_common(1)
+    assert len(set(stage_folders)) == len(stage_runs), Counter(stage_folders).most_common(1)
+    for agent in agents:  # an agent resumes its comparison run's folder, and trains it longer
+        extended = [run for run in stage_runs if folders[" ".join(run)] == folders[" ".join(agent)]]
+        assert len(extended) == 1 and epochs[" ".join(agent)] > epochs[" ".join(extended[0])]
 
 
 def test_run_comparison_runs_nothing_once_every_run_is_committed(tmp_path):
@@ -188,7 +198,7 @@ def test_compare_draws_expects_each_batch_divided_by_its_largest_weight(batch):
 def test_compare_draws_weighs_each_worker_over_its_own_episodes():
     from tests.replay.conftest import make_episodes, sparse_reward
     from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
-    from torchrl_cebp.samplers import InitialCEBPSampler, PerWorkerSampler
+    from torchrl_cebp.replay.samplers import InitialCEBPSampler, PerWorkerSampler
 
     compare_draws = _script("compare_draws")
     episodes = make_episodes(300)  # 300 in all, 150 a worker: under the 256 an InitialCEBPSampler weights from

@@ -10,7 +10,7 @@ from torchrl.data import LazyTensorStorage, PrioritizedSampler, TensorDictReplay
 from tests.replay.conftest import T, make_episodes
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay import EpisodeStorage
-from torchrl_cebp.samplers import UniformEpisodeSampler
+from torchrl_cebp.replay.samplers import UniformEpisodeSampler
 
 
 def test_the_buffer_generator_reaches_the_storage():

@@ -13,6 +13,7 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from torchrl.data.replay_buffers.samplers import PrioritizedSampler, Sampler
 from torchrl.data.replay_buffers.storages import Storage, TensorStorage
+from torchrl.data.replay_buffers.writers import RoundRobinWriter
 
 
 def buffer_generator(storage: Storage) -> torch.Generator | None:
@@ -20,6 +21,9 @@ def buffer_generator(storage: Storage) -> torch.Generator | None:
 
     ``ReplayBuffer.set_rng`` hands it to its storage, sampler and writer as ``_rng``, with no
     public getter; a sample unit only sees the storage.
+
+    Args:
+        storage (Storage): a buffer's storage.
     """
     return getattr(storage, "_rng", None)
 
@@ -29,6 +33,9 @@ def sampler_generator(sampler: Sampler) -> torch.Generator | None:
 
     ``ReplayBuffer`` always writes it to ``sampler._rng`` (``None`` when the buffer has no generator),
     and a ``Sampler`` subclass has no public getter for it.
+
+    Args:
+        sampler (Sampler): a buffer's sampler.
     """
     return getattr(sampler, "_rng", None)
 
@@ -45,6 +52,9 @@ def round_robin_position(buffer_state: dict[str, Any]) -> tuple[int, int]:
 
     The buffer keeps its writer's state under ``"_writer"``, and ``RoundRobinWriter`` names both numbers
     privately; reading a saved buffer's episodes in the order they came needs them.
+
+    Args:
+        buffer_state (dict): a ``ReplayBuffer.state_dict()``.
     """
     writer = buffer_state["_writer"]
     return int(writer["_cursor"]), int(writer["_write_count"])
@@ -56,6 +66,11 @@ def unchecked_tensordict(source: dict, batch_size: torch.Size, device: torch.dev
     ``TensorDict(...)`` validates every leaf; the episode storage's fast read builds one per draw
     from views it laid out itself, and the checks cost as much as the read. Nested dicts in
     ``source`` become nested TensorDicts of the same batch size and device.
+
+    Args:
+        source (dict): the entries.
+        batch_size (torch.Size): their common leading shape.
+        device (torch.device or None): their device.
     """
     return TensorDict._new_unsafe(source=source, batch_size=batch_size, device=device)
 
@@ -65,6 +80,9 @@ def prioritized_state(sampler: PrioritizedSampler) -> dict[str, Any]:
 
     Its own ``state_dict`` holds the C++ segment trees, which ``torch.load(weights_only=True)``
     refuses; the trees' values and the running maximum are only reachable privately.
+
+    Args:
+        sampler (PrioritizedSampler): the sampler.
     """
     return _plain_prioritized(sampler.alpha, sampler.beta, sampler._eps, sampler._max_priority,
                               sampler._sum_tree, sampler._min_tree, sampler.max_size)
@@ -74,6 +92,9 @@ def prioritized_state_of(torchrl_state: dict[str, Any]) -> dict[str, Any]:
     """A TorchRL ``PrioritizedSampler.state_dict()`` in :func:`prioritized_state`'s form.
 
     TorchRL's state names its entries after the sampler's private attributes, and holds the C++ trees.
+
+    Args:
+        torchrl_state (dict): a ``PrioritizedSampler.state_dict()``.
     """
     return _plain_prioritized(torchrl_state["_alpha"], torchrl_state["_beta"], torchrl_state["_eps"],
                               torchrl_state["_max_priority"], torchrl_state["_sum_tree"], torchrl_state["_min_tree"],
@@ -101,6 +122,10 @@ def load_prioritized_state(sampler: PrioritizedSampler, state: dict[str, Any]) -
 
     ``eps``, the trees and the running maximum have no public setter; ``_init()`` empties the trees
     (the exponent is set first, while they are empty, so that its setter has nothing to re-transform).
+
+    Args:
+        sampler (PrioritizedSampler): restored in place; its ``max_size`` must be the saved one.
+        state (dict): a :func:`prioritized_state`.
     """
     sampler._init()
     sampler.alpha = state["alpha"]
@@ -118,6 +143,10 @@ def exclude_from_draws(sampler: PrioritizedSampler, index: torch.Tensor) -> None
 
     ``update_priority`` stores ``(p + eps) ** alpha``, which is never 0; padding steps of
     variable-length episodes must never be drawn.
+
+    Args:
+        sampler (PrioritizedSampler): the sampler.
+        index (torch.Tensor): flat transition indices.
     """
     sampler._sum_tree[index] = torch.zeros(index.shape)
     sampler._min_tree[index] = torch.full(index.shape, float("inf"))
@@ -130,10 +159,45 @@ def stored_tensordict(storage: TensorStorage) -> TensorDictBase:
     a draw reads one contiguous run of memory per transition; TorchRL offers no hook to choose it.
     HER reads its goals through it too: ``storage.get(slice(None))`` is the same view, but costs
     about a third of a whole draw.
+
+    Args:
+        storage (TensorStorage): the storage.
     """
     return storage._storage
 
 
 def replace_stored_tensordict(storage: TensorStorage, data: TensorDictBase) -> None:
-    """Makes ``data`` (same keys, shapes and dtypes) the tensordict the storage reads and writes."""
+    """Makes ``data`` the tensordict the storage reads and writes.
+
+    Args:
+        storage (TensorStorage): the storage.
+        data (TensorDictBase): same keys, shapes and dtypes as the storage's tensordict.
+    """
     storage._storage = data
+
+
+def attached_buffers(storage: Storage) -> list[Any]:
+    """The replay buffers reading ``storage`` (``storage.attach`` has no public getter).
+
+    The episode storage checks a write against their samplers' needs, and names their ``dim_extend``
+    in its errors, before any row changes: after the write, a sampler that cannot score it would leave
+    rows stored that it never draws.
+
+    Args:
+        storage (Storage): the storage.
+    """
+    return list(storage._attached_entities_iter())
+
+
+def rewind_writers(storage: Storage, rows: torch.Tensor) -> None:
+    """Moves the round-robin writers of ``storage``'s buffers back to ``rows[0]``, before a write of ``rows``.
+
+    ``RoundRobinWriter.extend`` moves its cursor and write count (no public setter) before the storage stores
+    the write; after a write the storage refused, the next one must go where the refused one would have, or the
+    rows in between would count as stored without ever being written.
+    """
+    for buffer in attached_buffers(storage):
+        writer = buffer.writer
+        if isinstance(writer, RoundRobinWriter):
+            writer._cursor = int(rows[0])
+            writer._write_count = writer._write_count - rows.numel()

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from torchrl_cebp.training.checkpoint import read_policy_state
+from torchrl_cebp.training.checkpoint import UnreadableFileError, read_policy
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
@@ -26,14 +26,23 @@ def _policy_and_env(checkpoint: str | Path, **kwargs):
     ``kwargs`` go to ``make_env``.
     """
     from torchrl_cebp.envs import make_env_from_config
-    from torchrl_cebp.training.checkpoint import policy_from_state
 
-    state = read_policy_state(checkpoint)
-    return policy_from_state(state), make_env_from_config(state["env"], **kwargs)
+    policy, state = read_policy(checkpoint)
+    return policy, make_env_from_config(state["env"], **kwargs)
 
 
 def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -> float:
-    """Fraction of ``episodes`` deterministic episodes that end within the goal threshold (the trainer's measure)."""
+    """Fraction of ``episodes`` deterministic episodes that end within the goal threshold (the trainer's measure).
+
+    Args:
+        checkpoint (str or Path): a run directory, its ``checkpoint.pt``, or a policy file.
+        episodes (int, optional): the test episodes, run side by side. Defaults to ``10``.
+        seed (int, optional): seeds the envs. Defaults to ``1234``.
+
+    Raises:
+        FileNotFoundError: there is no such file.
+        UnreadableFileError: the file does not hold a policy.
+    """
     from torchrl_cebp.training.evaluation import evaluate_success_rate
 
     policy, env = _policy_and_env(checkpoint, seed=seed, num_envs=episodes)
@@ -49,7 +58,19 @@ def record_video(
     size: tuple[int, int] = (480, 360),
     fps: int = 25,
 ) -> Path:
-    """Renders ``episodes`` deterministic episodes to ``path`` (``.mp4`` or ``.gif``)."""
+    """Renders ``episodes`` deterministic episodes to ``path`` (``.mp4`` or ``.gif``).
+
+    Args:
+        checkpoint (str or Path): a run directory, its ``checkpoint.pt``, or a policy file.
+        path (str or Path): the video, ``.mp4`` or ``.gif``.
+        episodes (int, optional): the episodes recorded, one after the other. Defaults to ``2``.
+        seed (int, optional): seeds the env. Defaults to ``1234``.
+        size (tuple of int, optional): the frames' ``(width, height)``. Defaults to ``(480, 360)``.
+        fps (int, optional): frames per second. Defaults to ``25``.
+
+    Returns:
+        the video's path.
+    """
     path = video_path(path)
     policy, env = _policy_and_env(checkpoint, seed=seed, render_size=size)
     frames = []
@@ -67,7 +88,18 @@ def record_video(
 
 
 def video_path(path: str | Path) -> Path:
-    """``path`` as a Path, after checking that its extension is a video format :func:`write_video` writes."""
+    """``path`` as a Path, after checking that its extension is a video format :func:`write_video` writes.
+
+    Args:
+        path (str or Path): the video's path.
+
+    Raises:
+        ValueError: an extension other than ``.mp4`` and ``.gif``.
+
+    Example:
+        >>> video_path("push.mp4").name
+        'push.mp4'
+    """
     path = Path(path)
     if path.suffix not in VIDEO_SUFFIXES:
         raise ValueError(f"video {str(path)!r}: unknown format {path.suffix!r}; valid: {list(VIDEO_SUFFIXES)}")
@@ -76,6 +108,11 @@ def video_path(path: str | Path) -> Path:
 
 def write_video(frames: list[np.ndarray], path: str | Path, fps: int = 25) -> Path:
     """Writes RGB frames ``[H, W, 3]`` to ``path``: an H.264 MP4 or a looping GIF, by its extension.
+
+    Args:
+        frames (list of np.ndarray): uint8 RGB frames of one size.
+        path (str or Path): the video, ``.mp4`` or ``.gif``.
+        fps (int, optional): frames per second. Defaults to ``25``.
 
     Example:
         >>> import tempfile
@@ -96,6 +133,11 @@ def write_video(frames: list[np.ndarray], path: str | Path, fps: int = 25) -> Pa
 
 
 def main(argv: list[str] | None = None) -> None:
+    """The command line: ``python -m torchrl_cebp.evaluate RUN [--episodes N] [--video PATH]``.
+
+    Args:
+        argv (list of str, optional): the arguments; ``None`` reads ``sys.argv``. Defaults to ``None``.
+    """
     os.environ.setdefault("MUJOCO_GL", "osmesa")
     parser = argparse.ArgumentParser(description="Success rate of a checkpoint, and a video of a few episodes.")
     parser.add_argument("checkpoint", help="a run directory, its checkpoint.pt, or a policy file (policy.pt)")
@@ -106,7 +148,10 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes must be at least 1, got {args.episodes}")
-    rate = success_rate(args.checkpoint, args.episodes, args.seed)
+    try:
+        rate = success_rate(args.checkpoint, args.episodes, args.seed)
+    except (FileNotFoundError, UnreadableFileError) as error:
+        parser.exit(2, f"error: {error}\n")
     print(f"success rate over {args.episodes} episodes: {rate:.3f}")
     if args.video:
         print(f"wrote {record_video(args.checkpoint, args.video, args.video_episodes, args.seed)}")

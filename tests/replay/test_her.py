@@ -3,6 +3,7 @@ import copy
 import pickle
 import re
 
+import numpy as np
 import pytest
 import torch
 from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
@@ -10,7 +11,7 @@ from torchrl.envs import Compose, ObservationNorm, RewardScaling
 
 from tests.replay.conftest import T, make_episodes, sparse_reward
 from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, make_replay_buffer
-from torchrl_cebp.samplers import CEBPSampler, CPERSampler, EBPSampler, MEPSampler, PERSampler, UniformEpisodeSampler
+from torchrl_cebp.replay.samplers import CEBPSampler, CPERSampler, EBPSampler, MEPSampler, PERSampler, UniformEpisodeSampler
 
 
 def labelled_episodes(n, length=T, first_id=0):
@@ -102,7 +103,16 @@ def test_past_strategy_replays_an_earlier_transition_towards_the_drawn_steps_goa
     drawn = goal_state - 1  # the uniform sampler's step
     assert drawn.min() == 0 and drawn.max() == T - 1
     assert (transition_state <= drawn).all() and (transition_state < drawn)[drawn > 0].all()
-    assert 0.23 < (transition_state.float() / T).mean() < 0.27  # E[floor(U t)] for t uniform on [0, T): about T / 4
+    # floor(U t) is uniform on {0, ..., t - 1} (0 for t = 0), and t uniform on {0, ..., T - 1}: its exact law.
+    law = np.zeros(T)
+    for t in range(1, T):
+        law[:t] += 1.0 / (t * T)
+    law[0] += 1.0 / T
+    values = np.arange(T) / T
+    mean, sd = (law * values).sum(), np.sqrt((law * values**2).sum() - (law * values).sum() ** 2)
+    assert mean == pytest.approx((T - 2) * (T - 1) / (4 * T * T))  # 0.2352 for T = 50, not T / 4
+    tolerance = 5 * sd / np.sqrt(transition_state.numel())  # five standard errors of a mean of 4,096 draws
+    assert abs((transition_state.double() / T).mean().item() - mean) < tolerance
     unrelabelled = make_replay_buffer(None, HindsightRelabel(sparse_reward, future_p=0.0, strategy="past"),
                                       capacity=10 * T, batch_size=4096)
     unrelabelled.extend(labelled_episodes(4))

@@ -3,18 +3,19 @@ import numpy as np
 import pytest
 import torch
 from scipy.stats import chi2_contingency
-from torchrl.data import TensorDictReplayBuffer
+from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
 from tests.replay.test_samplers import hand_made, np_initial_cebp
-from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, make_replay_buffer, update_td_priorities
-from torchrl_cebp.samplers import (
+from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, make_replay_buffer
+from torchrl_cebp.replay.samplers import (
     InitialCEBPSampler,
     MEPSampler,
     PERSampler,
     PerWorkerSampler,
     UniformEpisodeSampler,
+    WorkerLayout,
     WorkerRows,
 )
 
@@ -47,7 +48,7 @@ def test_worker_rows_read_only_that_workers_episodes():
     storage = EpisodeStorage(4 * CYCLE * T)
     data = cycles(2)
     storage.set(torch.arange(2 * CYCLE), data)
-    view = WorkerRows(storage, worker=3, workers=WORKERS, episodes_per_worker=PER_WORKER)
+    view = WorkerRows(storage, worker=3, layout=WorkerLayout(WORKERS, PER_WORKER))
     assert view.shape == (4, T) and view.max_size == 8 * T and len(view) == 4 * T
     expected = data[torch.tensor([6, 7, 14, 15])]
     assert (view.get(slice(None)) == expected).all()
@@ -111,7 +112,7 @@ def test_per_shards_route_td_errors_and_anneal_together():
     batch = rb.sample()
     batch["td_error"] = torch.zeros(32)
     batch["td_error"][:8] = 1e6  # 8 of worker 0's transitions
-    update_td_priorities(rb, batch)
+    rb.update_tensordict_priority(batch)
     hot = {tuple(pair) for pair in batch["index"][:8].tolist()}
     drawn = torch.cat([rb.sample()["index"][:8] for _ in range(20)]).tolist()
     # uniform draws would hit these 8 of worker 0's 400 transitions 2% of the time
@@ -126,16 +127,43 @@ def test_per_shards_route_td_errors_and_anneal_together():
     assert [shard.beta for shard in sampler.samplers] == pytest.approx([1.0] * WORKERS)
 
 
-def test_torchrls_tensordict_priority_update_skips_per_worker_shards():
-    # Pins why update_td_priorities exists: TorchRL 0.14.1's update_tensordict_priority returns unless the
-    # buffer's sampler is a PrioritizedSampler. If this fails, TorchRL routes it now; the helper still works.
+def test_torchrls_tensordict_priority_update_reaches_every_per_shard():
     sampler = per_workers(4 * CYCLE * T)
+    assert isinstance(sampler, PrioritizedSampler)  # what TorchRL's update_tensordict_priority feeds
     rb = make_replay_buffer(sampler, HindsightRelabel(sparse_reward), capacity=4 * CYCLE * T, batch_size=32)
     rb.extend(make_episodes(CYCLE))
     batch = rb.sample()
     batch["td_error"] = torch.full((32,), 1e6)
     rb.update_tensordict_priority(batch)
-    assert [float(shard["max_priority"]) for shard in sampler.state_dict()["shards"]] == [1.0] * WORKERS
+    assert [float(shard["max_priority"]) for shard in sampler.state_dict()["shards"]] == [1e6] * WORKERS
+
+
+@pytest.mark.parametrize("make_shard", [RandomSampler, lambda: PrioritizedSampler(2 * CYCLE * T // WORKERS, 0.6, 0.4)])
+def test_torchrls_stock_samplers_work_as_the_workers_samplers(make_shard):
+    sampler = PerWorkerSampler(*[make_shard() for _ in range(WORKERS)], episodes_per_worker=PER_WORKER)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(2 * CYCLE * T), sampler=sampler, dim_extend=0, batch_size=64,
+                                priority_key="td_error")
+    rb.extend(cycles(2))
+    batch = rb.sample()
+    worker_of_row = batch["index"][:, 0] % CYCLE // PER_WORKER
+    assert worker_of_row.tolist() == sum(([w] * 16 for w in range(WORKERS)), [])
+    if isinstance(sampler, PrioritizedSampler):
+        batch["td_error"] = torch.zeros(64)
+        batch["td_error"][:16] = 1e6  # worker 0's draw
+        rb.update_tensordict_priority(batch)
+        hot = {tuple(pair) for pair in batch["index"][:16].tolist()}
+        drawn = rb.sample()["index"][:16].tolist()
+        assert sum(tuple(pair) in hot for pair in drawn) > 12
+
+
+def test_a_write_that_does_not_deal_out_to_the_workers_is_refused_and_stores_nothing():
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(40 * T), sampler=initial_cebp_workers(), dim_extend=0, batch_size=8)
+    with pytest.raises(ValueError, match=rf"write a multiple of {CYCLE} episodes at a time.*got 3"):
+        rb.extend(make_episodes(3))
+    assert len(rb) == 0
+    rb.extend(make_episodes(CYCLE))
+    with pytest.raises(ValueError, match=rf"write a multiple of {CYCLE} episodes at a time.*got 3"):
+        rb.sampler.mark_update(torch.arange(3), storage=rb.storage)  # as a storage without the check reports
 
 
 def test_a_per_shard_smaller_than_its_workers_rows_is_refused():

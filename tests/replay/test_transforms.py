@@ -28,15 +28,22 @@ def draw(env: EnvBase, **buffer) -> TensorDictBase:
 
 def test_the_goal_concatenated_by_the_buffer_transform_is_the_relabelled_one():
     # The env concatenates too (keeping its inputs), as a policy acting on the vector needs; the buffer rebuilds it.
-    env = TransformedEnv(SerialEnv(2, functools.partial(make_env, "push")), CatTensors(**CAT, del_keys=False))
+    env = TransformedEnv(SerialEnv(2, functools.partial(make_env, "push")), CatTensors(**CAT, del_keys=False, sort=False))
     stale = draw(env)
     fresh = draw(env, transform=replay_cat_tensors(**CAT, del_keys=False))
 
-    # CatTensors sorts its keys by default: the goal comes first, on the env as in the buffer.
-    assert not torch.equal(stale["observation_goal"][:, :3], stale["desired_goal"])  # the env's kept the old goal
+    # In the order given, the goal last: replay_cat_tensors does not sort (CatTensors does by default).
+    assert not torch.equal(stale["observation_goal"][:, -3:], stale["desired_goal"])  # the env's kept the old goal
     for root in ((), ("next",)):
-        expected = torch.cat([fresh[(*root, "desired_goal")], fresh[(*root, "observation")]], dim=-1)
+        expected = torch.cat([fresh[(*root, "observation")], fresh[(*root, "desired_goal")]], dim=-1)
         assert torch.equal(fresh[(*root, "observation_goal")], expected)
+
+
+def test_sorting_is_still_available_as_catTensors_offers_it():
+    env = TransformedEnv(SerialEnv(2, functools.partial(make_env, "push")), CatTensors(**CAT, del_keys=False))
+    fresh = draw(env, transform=replay_cat_tensors(**CAT, del_keys=False, sort=True))
+    expected = torch.cat([fresh["desired_goal"], fresh["observation"]], dim=-1)  # sorted: the goal first
+    assert torch.equal(fresh["observation_goal"], expected)
 
 
 def test_an_env_that_concatenates_and_drops_the_goal_names_the_missing_key():

@@ -12,7 +12,7 @@ from tests.replay.conftest import T, make_episodes, restore, sparse_reward
 from tests.replay.test_episodes import EndAboveHeight
 from torchrl_cebp.envs import make_env
 from torchrl_cebp.replay import EpisodeStorage, EpisodeWriter, HindsightRelabel, episode_lengths, make_replay_buffer
-from torchrl_cebp.samplers import CEBPSampler
+from torchrl_cebp.replay.samplers import CEBPSampler
 
 TRAJECTORY = ("collector", "traj_ids")
 

@@ -8,7 +8,7 @@ from tensordict import TensorDict
 
 from torchrl_cebp.envs import FETCH_OBSERVATION
 from torchrl_cebp.sim2real import SHIPPED_POLICY
-from torchrl_cebp.sim2real.__main__ import parse_args, run
+from torchrl_cebp.sim2real.__main__ import main, parse_args, run
 from torchrl_cebp.training import load_policy
 from torchrl_cebp.training.checkpoint import POLICY_FORMAT
 
@@ -26,6 +26,15 @@ def test_shipped_policy_acts_in_the_franka_action_space():
     action = policy(batch)["action"]
     assert action.shape == (5, 4) and action.abs().max() <= 1.0
     assert action.std(0).min() > 0  # it reads its input: different observations, different actions
+
+
+def test_a_damaged_policy_file_is_named_in_one_line(tmp_path, capsys):
+    path = tmp_path / "policy.pt"
+    path.write_bytes(SHIPPED_POLICY.read_bytes()[:1000])  # a copy cut short
+    assert main(["run", f"checkpoint={path}", "backend=sim", "episodes=1"]) == 2
+    assert capsys.readouterr().err == (
+        f"error: {path} does not load: it is not a complete file of torch.save (1000 bytes: truncated, or another format)\n"
+    )
 
 
 def test_run_uses_the_shipped_policy_by_default():

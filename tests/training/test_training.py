@@ -1,4 +1,3 @@
-import csv
 import math
 import subprocess
 import sys
@@ -8,14 +7,14 @@ from pathlib import Path
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
+from tests.tiny_run import REPO, TINY, TINY_RUN, config, copy_run, rows
 from torchrl_cebp.replay import HindsightRelabel
 from torchrl_cebp.training import ConfigError, load_checkpoint, load_policy, train, validate_config
-from torchrl_cebp.samplers import PerWorkerSampler
+from torchrl_cebp.replay.samplers import PerWorkerSampler
 from torchrl_cebp.training.config import check_same_run, env_label, warn_if_bf16_is_emulated
 from torchrl_cebp.training.builders import (
     TaskDims, derive_seed, episode_steps, make_agent, make_env, make_replay, make_sampler, make_training_collector,
@@ -26,27 +25,7 @@ from torchrl_cebp.training.evaluation import evaluate_success_rate
 from torchrl_cebp.training.metrics import RUN_SOURCES
 from torchrl_cebp.training.trainer import TEST_STREAM, Learner, RelabelledTransitions
 
-REPO = Path(__file__).resolve().parents[2]
-TINY = [
-    "epochs=2",
-    "cycles_per_epoch=2",
-    "updates_per_cycle=3",
-    "batch_size=16",
-    "test_episodes=2",
-    "replay.capacity=5000",
-    "agent.hidden=[32,32]",
-]
 SAMPLERS = ["her", "per", "ebp", "mep", "cper", "cebp", "cebp_released", "cebp_initial"]
-
-
-def config(*overrides: str):
-    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
-        return compose("config", overrides=[*TINY, *overrides])
-
-
-def rows(csv_path: Path) -> list[dict[str, str]]:
-    with csv_path.open(newline="") as f:
-        return list(csv.DictReader(f))
 
 
 @pytest.mark.parametrize("sampler", ["per", "mep", "cebp"])
@@ -87,11 +66,11 @@ def test_per_training_feeds_td_errors_back_on_merged_and_per_worker_replay(tmp_p
     assert float(rows(tmp_path / "progress.csv")[0]["is_weight_min"]) < 1.0
 
 
-def test_best_policy_is_the_last_epoch_with_the_highest_success_across_a_resume(tmp_path):
-    train(config("sampler=her", "env=push", "epochs=2", "test_episodes=4"), tmp_path)
-    train(config("sampler=her", "env=push", "epochs=4", "test_episodes=4", "resume=true"), tmp_path)
-    successes = [float(row["test_success"]) for row in rows(tmp_path / "progress.csv")]
-    best = torch.load(tmp_path / BEST_POLICY_NAME, weights_only=True)
+def test_best_policy_is_the_last_epoch_with_the_highest_success_across_a_resume(tiny_run, tmp_path):
+    run_dir = copy_run(tiny_run, tmp_path / "run")
+    train(config(*TINY_RUN, "epochs=4", "resume=true"), run_dir)
+    successes = [float(row["test_success"]) for row in rows(run_dir / "progress.csv")]
+    best = torch.load(run_dir / BEST_POLICY_NAME, weights_only=True)
     assert best["test_success"] == pytest.approx(max(successes))
     assert best["epoch"] == max(epoch for epoch, success in enumerate(successes) if success == max(successes))
 
@@ -109,10 +88,9 @@ def test_best_policy_keeps_its_record_across_a_resume_and_ties_replace_it(tmp_pa
     assert fresh.offer(policy(0, 0.1))
 
 
-def test_stored_episodes_are_the_checkpointed_buffers_whole_episodes(tmp_path):
-    train(config("sampler=her", "env=push", "epochs=2"), tmp_path)
-    episodes, overwritten = stored_episodes(load_checkpoint(tmp_path))
-    assert overwritten == 0 and episodes.shape == (int(rows(tmp_path / "progress.csv")[-1]["stored_episodes"]), 50)
+def test_stored_episodes_are_the_checkpointed_buffers_whole_episodes(tiny_run):
+    episodes, overwritten = stored_episodes(load_checkpoint(tiny_run))
+    assert overwritten == 0 and episodes.shape == (int(rows(tiny_run / "progress.csv")[-1]["stored_episodes"]), 50)
     # each row is one whole episode: it starts where the env reset it and its last step is the truncation
     assert episodes["next", "truncated"][:, -1].all() and not episodes["next", "truncated"][:, :-1].any()
     torch.testing.assert_close(episodes["next", "observation"][:, :-1], episodes["observation"][:, 1:])
@@ -144,7 +122,10 @@ def test_policy_file_is_small_and_acts_as_the_checkpoint(tmp_path):
 LEARNING_COLUMNS = ("test_success", "loss_actor", "loss_value", "q_mean", "is_weight_mean", "priority_ess_fraction")
 
 
-@pytest.mark.parametrize(("overlap", "threads"), [("false", 1), ("true", 1), ("true", 2)])
+# The overlapping variants wait on an env process each run starts (minutes on a loaded 2-core machine): slow set.
+@pytest.mark.parametrize(("overlap", "threads"), [
+    ("false", 1), pytest.param("true", 1, marks=pytest.mark.slow), pytest.param("true", 2, marks=pytest.mark.slow),
+])
 def test_resume_repeats_the_uninterrupted_run(tmp_path, overlap, threads):
     # CEBP: the sampler's priorities and the IS weights must come back too; with overlap, the
     # env process's env and exploration streams too, whatever threads the updates switch between
@@ -158,7 +139,11 @@ def test_resume_repeats_the_uninterrupted_run(tmp_path, overlap, threads):
     assert load_checkpoint(tmp_path / "split")["epoch"] == 1
 
 
-@pytest.mark.parametrize(("overlap", "sampler", "workers"), [("false", "cebp", 1), ("true", "cebp", 1), ("false", "per", 2)])
+@pytest.mark.parametrize(("overlap", "sampler", "workers"), [
+    ("false", "cebp", 1),
+    pytest.param("true", "cebp", 1, marks=pytest.mark.slow),
+    pytest.param("false", "per", 2, marks=pytest.mark.slow),
+])
 def test_kill_9_mid_epoch_then_resume_repeats_the_uninterrupted_run(tmp_path, overlap, sampler, workers):
     # workers=2: per-worker replay, every worker's PER trees and the annealed beta must come back
     run = (f"sampler={sampler}", f"overlap_collection={overlap}", f"workers={workers}", "epochs=3", "cycles_per_epoch=6")
@@ -193,13 +178,13 @@ def test_a_quick_runs_checkpoint_holds_only_its_episodes_and_restores_the_replay
         assert (replays[0].sample() == replays[1].sample()).all()
 
 
-def test_a_checkpoint_of_the_rollout_worker_trainer_is_refused_with_a_way_out(tmp_path):
-    train(config("epochs=1"), tmp_path)
-    state = load_checkpoint(tmp_path)
+def test_a_checkpoint_of_the_rollout_worker_trainer_is_refused_with_a_way_out(tiny_run, tmp_path):
+    run_dir = copy_run(tiny_run, tmp_path / "run")
+    state = load_checkpoint(run_dir)
     del state["format"]
-    torch.save(state, tmp_path / CHECKPOINT_NAME)
+    torch.save(state, run_dir / CHECKPOINT_NAME)
     with pytest.raises(ConfigError, match="format 1.*code_commit"):
-        train(config("resume=true"), tmp_path)
+        train(config(*TINY_RUN, "resume=true"), run_dir)
 
 
 def test_two_env_processes_collect_and_train(tmp_path):
@@ -245,12 +230,12 @@ def test_background_batch_is_busy_until_its_episodes_are_ready():
         batches.close()
 
 
-def test_refuses_to_overwrite_a_checkpoint_or_resume_another_run(tmp_path):
-    train(config("epochs=1"), tmp_path)
+def test_refuses_to_overwrite_a_checkpoint_or_resume_another_run(tiny_run, tmp_path):
+    run_dir = copy_run(tiny_run, tmp_path / "run")
     with pytest.raises(ConfigError, match="resume=true"):
-        train(config("epochs=1"), tmp_path)
+        train(config(*TINY_RUN), run_dir)
     with pytest.raises(ConfigError, match=r"made with sampler\._target_=.*UniformEpisodeSampler', this config has sampler\._target_=.*CPERSampler'"):
-        train(config("sampler=cper", "resume=true"), tmp_path)
+        train(config("env=push", "sampler=cper", "resume=true"), run_dir)
 
 
 @pytest.mark.parametrize("env", ["push_released", "pick_place_released", "slide_released"])
@@ -275,9 +260,9 @@ def test_capacity_below_one_cycle_and_bad_cebp_parameters_are_named_before_any_e
         train(config("preset=paper", "replay.capacity=99"), tmp_path / "capacity")  # 2 episodes of 50 steps each
     with pytest.raises(ConfigError, match=r"replay.capacity_per='shard': must be one of \['worker', 'total'\]"):
         train(config("replay.capacity_per=shard"), tmp_path / "capacity")
-    with pytest.raises(Exception, match=r"temperature=-1.0: must be a positive number"):
+    with pytest.raises(Exception, match=r"temperature=-1.0: allowed values lie in \(0.0, inf\)"):
         train(config("sampler=cebp", "sampler.temperature=-1.0"), tmp_path / "temperature")
-    with pytest.raises(Exception, match=r"scale=0.0: must be a positive number"):
+    with pytest.raises(Exception, match=r"scale=0.0: allowed values lie in \(0.0, inf\)"):
         train(config("sampler=cebp", "sampler.scale=0.0"), tmp_path / "scale")
     assert not any(tmp_path.rglob("progress.csv"))
 
@@ -291,10 +276,39 @@ def test_wrong_control_is_listed_with_what_is_allowed():
         validate_config(config("env=franka_pick_place", "env.touch_ignores_table=true"))
 
 
+# Each task's sampler values, written out: the paper's CEBP temperature T (0.01 on PickAndPlace and Push, 5 on
+# Slide), EBP's energy clip (only PickAndPlace clips), the released code's CEBP slope k and gripper box.
+INF = math.inf
+TASK_SAMPLER_VALUES = {
+    "pick_place": {"clip_energy": 0.5, "temperature": 0.01, "k": 0.1, "workspace": ((1.05, 0.4, 0.419), (1.55, 1.1, INF))},
+    "push": {"clip_energy": 999.0, "temperature": 0.01, "k": 0.1, "workspace": ((1.05, 0.4, 0.4), (1.55, 1.11, INF))},
+    "slide": {"clip_energy": 999.0, "temperature": 5.0, "k": 0.05, "workspace": ((0.7, 0.3, 0.4), (1.95, 1.2, INF))},
+}
+
+
+def expected_sampler(sampler: str, env: str) -> tuple[str, dict]:
+    """The class a sampler config builds on a task, and the values it must hold."""
+    task = TASK_SAMPLER_VALUES[env]
+    return {
+        "her": ("UniformEpisodeSampler", {}),
+        # TINY: capacity 5000; beta anneals over epochs x cycles x updates = 2 x 2 x 3 draws
+        "per": ("PERSampler", {"alpha": 0.6, "beta": 0.4, "beta_end": 1.0, "beta_anneal_draws": 12, "_max_capacity": 5000}),
+        "ebp": ("EBPSampler", {"clip_energy": task["clip_energy"], "temperature": 1.0}),
+        "mep": ("MEPSampler", {"n_components": 3, "temperature": 1.0, "seed": 0}),
+        "cper": ("CPERSampler", {"threshold": 1.0, "lam": 10.0}),
+        "cebp": ("CEBPSampler", {"scale": 100.0, "temperature": task["temperature"], "beta": 1.0, "workspace": None}),
+        "cebp_released": ("ReleasedCEBPSampler", {"k": task["k"], "workspace": task["workspace"]}),
+        "cebp_initial": ("InitialCEBPSampler", {"beta": 0.7, "workspace": task["workspace"]}),
+    }[sampler]
+
+
 @pytest.mark.parametrize("sampler", SAMPLERS)
 @pytest.mark.parametrize("env", ["pick_place", "push", "slide"])
-def test_every_sampler_config_instantiates(sampler, env):
-    instantiate(config(f"sampler={sampler}", f"env={env}").sampler)
+def test_every_sampler_config_builds_its_sampler_with_the_tasks_values(sampler, env):
+    built = instantiate(config(f"sampler={sampler}", f"env={env}").sampler)
+    name, values = expected_sampler(sampler, env)
+    assert type(built).__name__ == name
+    assert {key: getattr(built, key) for key in values} == values
 
 
 def test_per_anneals_over_the_run_or_over_the_papers_50_epochs_in_a_comparison():
@@ -336,6 +350,7 @@ def _tiny_stage(stage: str, sweep_dir: Path, *overrides: str) -> subprocess.Comp
                 f"hydra.sweep.dir={sweep_dir}", *overrides)
 
 
+@pytest.mark.bookkeeping
 def test_comparison_stage_continues_where_it_stopped(tmp_path):
     first = _tiny_stage("push", tmp_path, "sampler=her,cebp", "epochs=1")
     assert first.returncode == 0, first.stderr
@@ -348,6 +363,7 @@ def test_comparison_stage_continues_where_it_stopped(tmp_path):
     assert rows(her)[0] == first_epoch[0]  # the finished epoch was not redone
 
 
+@pytest.mark.bookkeeping
 def test_per_worker_and_merged_runs_get_their_own_folders(tmp_path):
     result = _cli("-m", "+comparison=push_standard", *TINY, "epochs=1", "workers=2", "seed=0", "sampler=her",
                   "replay.per_worker=true,false", "hydra/launcher=basic", f"hydra.sweep.dir={tmp_path}")
@@ -356,11 +372,12 @@ def test_per_worker_and_merged_runs_get_their_own_folders(tmp_path):
         assert rows(tmp_path / f"push-standard/her/{folder}/seed0/progress.csv")[0]["replay"] == layout
 
 
+@pytest.mark.bookkeeping
 def test_temperature_stage_gives_each_temperature_its_own_runs(tmp_path):
     result = _tiny_stage("push_temperature", tmp_path, "sampler.temperature=0.1,1.0")
     assert result.returncode == 0, result.stderr
     for temperature in ("0.1", "1.0"):
-        assert load_checkpoint(tmp_path / f"push-extended-temperature/cebp_T{temperature}/paper/seed0")["epoch"] == 1
+        assert load_checkpoint(tmp_path / f"push-standard-temperature/cebp_T{temperature}/paper/seed0")["epoch"] == 1
 
 
 def test_cli_rejects_a_bad_value_at_start(tmp_path):

@@ -1,5 +1,5 @@
 """Episode replay: storage of ``[episode, t]`` rows, HER relabelling, and the samplers."""
-from torchrl_cebp.replay.buffer import episode_storage, make_replay_buffer, update_td_priorities
+from torchrl_cebp.replay.buffer import episode_storage, make_replay_buffer
 from torchrl_cebp.replay.episodes import episode_lengths
 from torchrl_cebp.replay.her import HindsightRelabel
 from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage, episode_rows
@@ -16,5 +16,4 @@ __all__ = [
     "episode_storage",
     "make_replay_buffer",
     "replay_cat_tensors",
-    "update_td_priorities",
 ]

@@ -6,12 +6,12 @@ from typing import Literal
 import torch
 from tensordict import TensorDictBase
 from torchrl.data import TensorDictReplayBuffer
-from torchrl.data.replay_buffers.samplers import PrioritizedSampler, Sampler
+from torchrl.data.replay_buffers.samplers import Sampler
 from torchrl.data.replay_buffers.writers import Writer
 from torchrl.envs import Transform
 
 from torchrl_cebp.replay.her import HindsightRelabel
-from torchrl_cebp.replay.samplers import PERSampler, UniformEpisodeSampler, worker_sampler
+from torchrl_cebp.replay.samplers import PERSampler, UniformEpisodeSampler
 from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage
 
 
@@ -61,8 +61,8 @@ def make_replay_buffer(
     ``rb.sample()`` returns ``[batch_size]`` transitions with relabelled goals
     and rewards (relabelled before ``transform`` runs), ``"index"`` (``[B, 2]``:
     episode row, step) and, for samplers with importance-sampling weights,
-    ``"priority_weight"``. With a :class:`~torchrl_cebp.samplers.PERSampler`,
-    :func:`update_td_priorities` feeds ``batch["td_error"]`` back, per worker too.
+    ``"priority_weight"``. With a :class:`~torchrl_cebp.replay.samplers.PERSampler` (or a per-worker sampler of
+    them), ``rb.update_tensordict_priority(batch)`` feeds ``batch["td_error"]`` back.
     ``generator`` drives every random draw of a sample: the sampler's and HER's.
     ``writer``, ``prefetch``, ``pin_memory`` and ``shared`` mean what they mean to
     :class:`~torchrl.data.ReplayBuffer`; HER keeps each prefetching thread's draw apart.
@@ -71,7 +71,7 @@ def make_replay_buffer(
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
-        >>> from torchrl_cebp.samplers import CEBPSampler
+        >>> from torchrl_cebp.replay.samplers import CEBPSampler
         >>> reward = lambda ag, g: -(torch.linalg.vector_norm(ag - g, dim=-1, keepdim=True) > 0.05).float()
         >>> n, T = 4, 50
         >>> step = {"observation": torch.rand(n, T, 25), "achieved_goal": torch.rand(n, T, 3),
@@ -104,32 +104,3 @@ def make_replay_buffer(
         pin_memory=pin_memory,
         shared=shared,
     )
-
-
-def update_td_priorities(rb: TensorDictReplayBuffer, batch: TensorDictBase) -> None:
-    """Feeds a trained batch's TD errors (``batch[rb.priority_key]``) back to ``rb``'s PER, one or one per worker.
-
-    TorchRL's ``rb.update_tensordict_priority(batch)`` feeds them only to a
-    :class:`~torchrl.data.PrioritizedSampler`: it returns without a word for any other
-    sampler, a :class:`~torchrl_cebp.samplers.PerWorkerSampler` of PERs included, which
-    then draws uniformly for ever. This passes ``batch["index"]`` and the errors to
-    ``rb.update_priority``, which routes them to each worker's PER. Samplers that
-    take no TD errors (HER, CEBP, EBP, MEP, CPER) are left alone.
-
-    Examples:
-        >>> import torch
-        >>> from tensordict import TensorDict
-        >>> from torchrl_cebp.replay import EpisodeStorage
-        >>> from torchrl_cebp.samplers import PERSampler, PerWorkerSampler
-        >>> sampler = PerWorkerSampler(PERSampler(4 * 50), PERSampler(4 * 50))
-        >>> rb = TensorDictReplayBuffer(storage=EpisodeStorage(8 * 50), sampler=sampler, batch_size=4,
-        ...                             dim_extend=0, priority_key="td_error")
-        >>> _ = rb.extend(TensorDict({"observation": torch.randn(2, 50, 25)}, [2, 50]))
-        >>> batch = rb.sample()
-        >>> _ = batch.set("td_error", torch.full((4,), 1e3))
-        >>> update_td_priorities(rb, batch)
-        >>> [float(shard["max_priority"]) for shard in sampler.state_dict()["shards"]]  # the highest error fed back
-        [1000.0, 1000.0]
-    """
-    if isinstance(worker_sampler(rb.sampler), PrioritizedSampler):
-        rb.update_priority(batch["index"], batch[rb.priority_key])

@@ -1,9 +1,14 @@
 """What every part of the replay reads from episode rows: their valid length, and their "next" keys."""
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
+from torchrl.data.replay_buffers.storages import Storage, TensorStorage
+
+from torchrl_cebp import _upstream
 
 
 def next_key(key: NestedKey) -> tuple[str, ...]:
@@ -59,23 +64,85 @@ def end_flags(
     return ends.reshape(*ends.shape[:2], -1).any(-1)
 
 
-def require_time_at(data: TensorDictBase, dim: int) -> None:
+def stored_lengths(storage: Storage, rows: torch.Tensor, end_key: NestedKey = ("next", "done")) -> torch.Tensor:
+    """Valid steps of the episodes in ``rows`` of any ``ndim=2`` storage.
+
+    The one way samplers, PER and HER learn them: an episode storage keeps them (its ``valid_lengths``), and
+    answers when it cuts episodes at the same ``end_key``; any other storage (TorchRL's ``LazyTensorStorage``)
+    is read at the rows' flags.
+
+    Examples:
+        >>> from tensordict import TensorDict
+        >>> from torchrl.data import LazyTensorStorage
+        >>> done = torch.zeros(2, 4, 1, dtype=torch.bool)
+        >>> done[0, 1] = True
+        >>> storage = LazyTensorStorage(8, ndim=2)
+        >>> storage.set(torch.arange(2), TensorDict({"next": {"done": done}}, [2, 4]))
+        >>> stored_lengths(storage, torch.tensor([1, 0])).tolist()
+        [4, 2]
+    """
+    if getattr(storage, "end_key", None) == end_key and hasattr(storage, "valid_lengths"):
+        return storage.valid_lengths(rows)
+    if isinstance(storage, TensorStorage):  # the rows' flags alone
+        return episode_lengths(_upstream.stored_tensordict(storage), end_key, rows)
+    return episode_lengths(storage.get(rows), end_key)
+
+
+def shared_length(storage: Storage, end_key: NestedKey = ("next", "done")) -> int | None:
+    """The valid length every episode of ``storage`` shares, when its storage knows one, else ``None``.
+
+    Lets a draw skip the per-row lengths in the usual case of episodes that all run a fixed length.
+
+    Examples:
+        >>> from torchrl_cebp.replay import EpisodeStorage
+        >>> from tensordict import TensorDict
+        >>> storage = EpisodeStorage(4 * 50)
+        >>> done = torch.zeros(2, 50, 1, dtype=torch.bool)
+        >>> storage.set(torch.arange(2), TensorDict({"next": {"done": done}}, [2, 50]))
+        >>> shared_length(storage)
+        50
+    """
+    if getattr(storage, "end_key", None) == end_key and hasattr(storage, "common_length"):
+        return storage.common_length()
+    return None
+
+
+def require_time_at(data: TensorDictBase, dim: int, dim_extends: Sequence[int] = ()) -> None:
     """Refuses a batch whose ``"time"`` dimension (TorchRL's collectors and ``rollout`` name it) is not ``dim``.
+
+    Args:
+        data (TensorDictBase): the batch as the storage or writer receives it.
+        dim (int): where its time dimension must be.
+        dim_extends (sequence of int, optional): the ``dim_extend`` of the buffers writing it, to tell a batch
+            the buffer transposed (``dim_extend`` other than 0) from one laid out ``[T, envs]``. Defaults to none.
 
     Examples:
         >>> from tensordict import TensorDict
         >>> frames = TensorDict(batch_size=[12, 50], names=[None, "time"])
         >>> require_time_at(frames, 1)
-        >>> require_time_at(frames.transpose(0, 1), 1)  # doctest: +ELLIPSIS
+        >>> require_time_at(frames.transpose(0, 1), 1, dim_extends=[1])  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        ValueError: the batch of shape [50, 12] has its 'time' dimension at 0, not 1: ...dim_extend=0
+        ValueError: the batch of shape [50, 12] has its 'time' dimension at 0, not 1: the buffer ... dim_extend=0
+        >>> require_time_at(frames.transpose(0, 1), 1, dim_extends=[0])  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: the batch of shape [50, 12] has its 'time' dimension at 0, not 1: the batch is laid out ...
     """
     names = data.names
     if "time" in names and names.index("time") != dim:
+        transposed_by_buffer = "the buffer transposed it (its dim_extend is not 0): build it with dim_extend=0"
+        laid_out = (f"the batch is laid out with time first; give it with time last, e.g. "
+                    f"batch.transpose({names.index('time')}, {dim})")
+        if not dim_extends:
+            cause = f"either {transposed_by_buffer}, or {laid_out}"
+        elif any(extend != 0 for extend in dim_extends):
+            cause = transposed_by_buffer
+        else:
+            cause = laid_out
         raise ValueError(
             f"the batch of shape {list(data.shape)} has its 'time' dimension at {names.index('time')}, not {dim}: "
-            "the buffer transposed it (TorchRL's default dim_extend); build it with dim_extend=0"
+            f"{cause}"
         )
 
 

@@ -12,9 +12,8 @@ from torchrl.data.replay_buffers.sample_units import SampleUnit
 from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
-from torchrl_cebp.replay.episodes import episode_lengths, next_key
+from torchrl_cebp.replay.episodes import episode_lengths, next_key, shared_length, stored_lengths
 from torchrl_cebp.replay.samplers.base import require_key, split_index
-from torchrl_cebp.replay.storage import _EpisodeRows
 
 RewardFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 STRATEGIES = ("future", "final", "episode", "past")
@@ -60,6 +59,10 @@ class HindsightRelabel(SampleUnit):
         end_key: the flag that ends an episode before its row does.
         relabelled_key: a bool entry of the sample info telling which transitions were relabelled
             (``None`` to omit it).
+        success_key: the success flag of the next-state (the Fetch envs' ``is_success``), rewritten from the
+            relabelled reward: success where the reward is 0, as the sparse reward gives it only on reaching the goal.
+            ``None`` leaves it as stored (it then holds the stored goal's success, not the relabelled one's).
+            Defaults to ``("next", "is_success")``; a batch without it is left without it.
 
     In a buffer the coin and the goal choice draw from the buffer's generator (``generator=`` or
     ``set_rng``; else torch's global one), the one the sampler draws from: ``rb.state_dict()``
@@ -97,6 +100,7 @@ class HindsightRelabel(SampleUnit):
         reward_key: NestedKey = ("next", "reward"),
         end_key: NestedKey = ("next", "done"),
         relabelled_key: NestedKey | None = "her_relabelled",
+        success_key: NestedKey | None = ("next", "is_success"),
     ) -> None:
         if strategy not in STRATEGIES:
             raise ValueError(f"unknown HER strategy {strategy!r}; valid strategies: {list(STRATEGIES)}")
@@ -111,6 +115,7 @@ class HindsightRelabel(SampleUnit):
         self.reward_key = reward_key
         self.end_key = end_key
         self.relabelled_key = relabelled_key
+        self.success_key = success_key
         self._pending = threading.local()  # expand() -> collate() of one draw, per sampling thread
         self._collated = False  # whether a draw has reached collate(): the buffer calls it
 
@@ -166,7 +171,11 @@ class HindsightRelabel(SampleUnit):
         The one place both consumers (:meth:`relabel` and the buffer's :meth:`collate`) build them.
         """
         goal = torch.where(relabel.unsqueeze(-1), candidate, stored_goal)
-        return {self.goal_key: goal, self.next_goal_key: goal, self.reward_key: self.reward_fn(next_achieved, goal)}
+        reward = self.reward_fn(next_achieved, goal)
+        entries = {self.goal_key: goal, self.next_goal_key: goal, self.reward_key: reward}
+        if self.success_key is not None:
+            entries[self.success_key] = reward == 0
+        return entries
 
     def _draw(
         self,
@@ -201,11 +210,9 @@ class HindsightRelabel(SampleUnit):
                 )
         rows, steps = split_index(index)
         generator = _upstream.buffer_generator(storage)
-        lengths = None
-        if isinstance(storage, _EpisodeRows) and storage.end_key == self.end_key:
-            lengths = storage.common_length()
-            if lengths is None:
-                lengths = storage.valid_lengths(rows)
+        lengths = shared_length(storage, self.end_key)
+        if lengths is None:
+            lengths = stored_lengths(storage, rows, self.end_key)
         stored = _upstream.stored_tensordict(storage)
         require_key(stored, self.goal_key, (None,))  # collate() reads it from the batch
         relabel, candidate = self._draw(stored, rows, steps, generator, lengths)
@@ -236,6 +243,10 @@ class HindsightRelabel(SampleUnit):
         for key, value in self._relabelled(
             relabel, candidate, data.get(self.goal_key), data.get(self.next_achieved_goal_key)
         ).items():
+            if key == self.success_key:
+                if key not in data.keys(True, True):  # stored episodes without the flag get none
+                    continue
+                value = value.to(data.get(key).dtype)
             data.set(key, value)
         return data
 

@@ -1,7 +1,9 @@
 """Storage of whole episodes as rows of a TorchRL tensor storage."""
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from multiprocessing.context import get_spawning_popen
 from typing import Any
 
 import torch
@@ -101,7 +103,9 @@ class _EpisodeRows:
     """
 
     end_key: NestedKey = ("next", "done")
-    _lengths: torch.Tensor | None = None
+    _stored_keys: tuple[TensorDictBase, dict[tuple[str, ...], set[str]]] | None = None  # stored tensordict, its names
+    _lengths: torch.Tensor | None = None  # per row; a row not written yet counts as whole
+    _short_rows = 0  # rows whose episode ends before the row does: while none, every row shares its length
     _common_length: int | None = None
     row_writes: RowWrites | None = None  # from the first write on
     _lengths_watch: RowWriteWatch | None = None
@@ -112,10 +116,7 @@ class _EpisodeRows:
         return self._lengths.index_select(0, rows)
 
     def common_length(self) -> int | None:
-        """The valid length every row shares (the row length unless episodes end early), else ``None``.
-
-        Lets a draw skip the per-row lengths in the usual case of episodes that all run a fixed length.
-        """
+        """The valid length every row shares (the row length unless episodes end early), else ``None``."""
         self._read_lengths_if_unknown()
         return self._common_length
 
@@ -127,33 +128,62 @@ class _EpisodeRows:
                 self.row_writes = RowWrites(rows)
             self._lengths_watch = self.row_writes.watch()
             # Only the filled rows are read: the others were never written, so their memory is never touched.
-            # Counted as full rows, they leave one check to cover the filled ones.
-            filled = self.shape[0]
             self._lengths = torch.full((rows,), row_length, dtype=torch.long)
-            self._lengths[:filled] = episode_lengths(stored[:filled], self.end_key)
-            self._common_length = common_length(self._lengths)
+            self._short_rows = 0
+            filled = self.shape[0]
+            self._set_lengths(torch.arange(filled), episode_lengths(stored[:filled], self.end_key))
             return
         rows = self._lengths_watch.new_rows()
         if rows.numel():  # written by another process
-            self._lengths[rows] = episode_lengths(self.get(rows), self.end_key)
-            self._common_length = common_length(self._lengths)
+            self._set_lengths(rows, episode_lengths(self.get(rows), self.end_key))
+
+    @property
+    def _steps(self) -> int:
+        """The row length (TorchRL's ``shape`` recomputes the filled rows on every call)."""
+        return _upstream.stored_tensordict(self).shape[1]
+
+    def _set_lengths(self, rows: torch.Tensor, lengths: torch.Tensor) -> None:
+        row_length = self._steps
+        now, before = lengths < row_length, self._lengths[rows] < row_length
+        self._short_rows += int(torch.count_nonzero(now) - torch.count_nonzero(before))
+        self._lengths[rows] = lengths
+        # A full pass only while some episode ends early: the usual fixed-length episodes cost a count per write.
+        self._common_length = row_length if self._short_rows == 0 else common_length(self._lengths)
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
+        if isinstance(data, TensorDictBase):  # every check before any row changes: a refused write stores nothing
+            try:
+                self._check_rows(data)
+                for buffer in _upstream.attached_buffers(self):
+                    check = getattr(buffer.sampler, "check_episodes", None)
+                    if check is not None:
+                        check(data)
+            except Exception:
+                if set_cursor and isinstance(cursor, torch.Tensor) and cursor.numel():
+                    _upstream.rewind_writers(self, cursor.reshape(-1))
+                raise
+        self._store(cursor, data, set_cursor)
         if isinstance(data, TensorDictBase):
-            self._check_rows(data)
-        super().set(cursor, data, set_cursor=set_cursor)
-        if isinstance(data, TensorDictBase):
-            n_rows = self.max_size // self.shape[1]
-            rows = torch.arange(n_rows)[cursor].reshape(-1)
+            n_rows = self.max_size // self._steps
+            rows = cursor.reshape(-1) if isinstance(cursor, torch.Tensor) else torch.arange(n_rows)[cursor].reshape(-1)
             if self.row_writes is None:
                 self.row_writes = RowWrites(n_rows)
             self.row_writes.record(rows)
             if self._lengths is None:  # first write, or first since a restore: every row from its flags
                 self._read_lengths_if_unknown()
             else:
-                self._lengths[rows] = episode_lengths(data, self.end_key)
-                self._common_length = common_length(self._lengths)
+                self._set_lengths(rows, episode_lengths(data, self.end_key))
                 self._lengths_watch.saw(rows)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # Torch sends the lengths as shared memory too; each process keeps its own, updated from the write counts.
+        if state.get("_lengths") is not None:
+            state = {**state, "_lengths": state["_lengths"].clone()}
+        super().__setstate__(state)
+
+    def _store(self, cursor: Any, data: Any, set_cursor: bool) -> None:
+        """Writes ``data`` at ``cursor`` (the TorchRL storage's own write)."""
+        super().set(cursor, data, set_cursor=set_cursor)
 
     def _check_rows(self, data: TensorDictBase) -> None:
         """Refuses a write whose rows cannot each be one episode of the storage's length."""
@@ -162,20 +192,36 @@ class _EpisodeRows:
                 f"episode storages take whole episodes shaped [n_episodes, T], got batch shape {list(data.shape)}: "
                 f"{ASSEMBLE_FRAMES}"
             )
-        require_time_at(data, 1)
+        require_time_at(data, 1, [buffer.dim_extend for buffer in _upstream.attached_buffers(self)])
+        if self.initialized:
+            self._check_keys(data)
         ends = end_flags(data, self.end_key)
-        if ends is not None:
-            counts = ends.sum(-1)
+        counts = None if ends is None else ends.sum(-1)
+        if counts is not None and bool((counts > 1).any()):
             crowded = int(counts.argmax())
-            if counts[crowded] > 1:
-                raise ValueError(
-                    f"row {crowded} of the batch of shape {list(data.shape)} holds {int(counts[crowded])} episode "
-                    f"ends ({self.end_key!r} flags), but a row is one episode: {ASSEMBLE_FRAMES}; a batch "
-                    "[envs, T] transposed by the buffer needs dim_extend=0"
-                )
-        if self.initialized and data.shape[1] != self.shape[1]:
             raise ValueError(
-                f"episodes of {data.shape[1]} steps cannot go into a storage of {self.shape[1]}-step episodes"
+                f"row {crowded} of the batch of shape {list(data.shape)} holds {int(counts[crowded])} episode "
+                f"ends ({self.end_key!r} flags), but a row is one episode: {ASSEMBLE_FRAMES}"
+            )
+        if self.initialized and data.shape[1] != self._steps:
+            raise ValueError(
+                f"episodes of {data.shape[1]} steps cannot go into a storage of {self._steps}-step episodes"
+            )
+
+    def _check_keys(self, data: TensorDictBase) -> None:
+        """Refuses a write that lacks a stored entry: its rows would keep the entry's old memory."""
+        stored = _upstream.stored_tensordict(self)
+        if self._stored_keys is None or self._stored_keys[0] is not stored:
+            self._stored_keys = stored, _names_by_node(stored.keys(True, True))
+        # Each node's names (no nested iteration: it costs more than the write); "index": TorchRL's writers add the
+        # index they write to, to some writes only.
+        if all(names - {"index"} <= _names_at(data, path) for path, names in self._stored_keys[1].items()):
+            return
+        stored_keys = [key for key in stored.keys(True, True) if key != "index"]
+        missing = [key for key in stored_keys if data.get(key, None) is None]
+        if missing:
+            raise KeyError(
+                f"a write into an episode storage must hold every stored entry: it lacks {sorted(map(str, missing))}"
             )
 
     def state_dict(self) -> dict[str, Any]:
@@ -292,6 +338,34 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             # Laid out once it holds data, not at the first draw: a process it is sent to writes into the same blocks.
             self._layout()
 
+    def _store(self, cursor: Any, data: Any, set_cursor: bool) -> None:
+        # Whole rows of the stored entries, no more and no fewer: one copy per dtype block, where TorchRL's write
+        # copies each entry apart (the most of a write's time). Its own write, of no entry, keeps its length,
+        # cursor and revision.
+        fast = self.initialized and isinstance(cursor, torch.Tensor) and cursor.ndim == 1 and type(data) is TensorDict
+        if fast:
+            self._layout()
+            fast = all(_names_at(data, path) == names for path, names in self._names_by_node.items())
+        if not fast:
+            return super()._store(cursor, data, set_cursor)
+        rows = []
+        for block, keys in self._row_blocks:
+            parts = [data.get(key).reshape(*data.shape, -1) for key in keys]
+            rows.append((block, parts[0] if len(parts) == 1 else torch.cat(parts, dim=-1)))
+        super()._store(cursor, TensorDict(batch_size=data.shape, device=self.device), set_cursor)
+        for block, values in rows:
+            block.index_copy_(0, cursor.to(block.device), values.to(block.device, block.dtype))
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = super().__getstate__()
+        if get_spawning_popen() is None:
+            # A copy (deepcopy, pickle) copies each entry apart from the blocks it was a view of: the copy lays
+            # its entries out again. Sent to a spawned process, both stay views of the same shared memory.
+            state = {**state, "_layout_source": None}
+            for cache in ("_blocks", "_row_blocks", "_names_by_node", "_plan", "_n_nodes", "_row_length"):
+                state.pop(cache, None)
+        return state
+
     def _layout(self) -> tuple[list[tuple[torch.Tensor, list[int]]], list[tuple], int]:
         """The flat dtype blocks with their entries' widths, and the read plan; rebuilt when the storage is replaced."""
         if self._layout_source is not _upstream.stored_tensordict(self):
@@ -319,17 +393,34 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
                 (block.flatten(0, 1), [f.stop - f.start for f in fields if f.dtype == dtype])
                 for dtype, block in blocks.items()
             ]
+            self._row_blocks = [(block, [f.key for f in fields if f.dtype == dtype]) for dtype, block in blocks.items()]
+            self._names_by_node = _names_by_node(field.key for field in fields)
             self._plan, self._n_nodes = _read_plan(fields)
             self._row_length = steps  # storage.shape is recomputed on every read (~10% of a draw of 256)
         return self._blocks, self._plan, self._n_nodes
 
     def get(self, index: Any) -> Any:
-        if not (self.initialized and _is_pair_index(index)):
-            return super().get(index)
-        blocks, plan, n_nodes = self._layout()
-        flat = torch.add(index[1], index[0], alpha=self._row_length)
-        # One gather per dtype block; split() cuts out all of its entries in one call (a slice each costs twice that).
-        columns = [c for block, widths in blocks for c in block.index_select(0, flat).split(widths, dim=1)]
+        if self.initialized and _is_pair_index(index):
+            blocks, plan, n_nodes = self._layout()
+            flat = torch.add(index[1], index[0], alpha=self._row_length)
+            # One gather per dtype block; split() cuts out all of its entries in one call (a slice each costs twice).
+            columns = [c for block, widths in blocks for c in block.index_select(0, flat).split(widths, dim=1)]
+            return self._assembled(columns, plan, n_nodes, flat.shape)
+        if self.initialized and isinstance(index, slice) and index.step in (None, 1):
+            # Consecutive rows (what a sampler reads after a write) as views of the blocks, without TorchRL's
+            # per-entry indexing of the stored tensordict.
+            blocks, plan, n_nodes = self._layout()
+            first, stop, _ = index.indices(self.shape[0])
+            stop = max(stop, first)
+            steps = self._row_length
+            columns = [c.unflatten(0, (stop - first, steps))
+                       for block, widths in blocks for c in block[first * steps : stop * steps].split(widths, dim=1)]
+            return self._assembled(columns, plan, n_nodes, torch.Size([stop - first, steps]))
+        return super().get(index)
+
+    def _assembled(self, columns: list[torch.Tensor], plan: list[tuple], n_nodes: int,
+                   batch_size: torch.Size) -> TensorDictBase:
+        """The tensordict of the stored entries from their gathered ``columns``, nested as :func:`_read_plan` says."""
         nodes: list[dict] = [{} for _ in range(n_nodes)]
         for node, name, child, column, shape in plan:
             if child is not None:
@@ -337,7 +428,22 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             else:
                 value = columns[column]
                 nodes[node][name] = value if shape is None else _reshaped(value, shape)
-        return _upstream.unchecked_tensordict(nodes[0], flat.shape, self.device)
+        return _upstream.unchecked_tensordict(nodes[0], batch_size, self.device)
+
+
+def _names_by_node(keys: Iterable[NestedKey]) -> dict[tuple[str, ...], set[str]]:
+    """The names under each node of a tensordict with these leaf ``keys`` (``()`` for the root)."""
+    nodes: dict[tuple[str, ...], set[str]] = {(): set()}
+    for key in keys:
+        path = (key,) if isinstance(key, str) else tuple(key)
+        for depth in range(len(path)):
+            nodes.setdefault(path[:depth], set()).add(path[depth])
+    return nodes
+
+
+def _names_at(data: TensorDictBase, path: tuple[str, ...]) -> set[str]:
+    node = data if not path else data.get(path, None)
+    return set() if not isinstance(node, TensorDictBase) else set(node.keys())
 
 
 def _reshaped(columns: torch.Tensor, shape: torch.Size) -> torch.Tensor:

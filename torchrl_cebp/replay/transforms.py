@@ -11,7 +11,7 @@ from torchrl_cebp.replay.episodes import next_key
 
 
 def replay_cat_tensors(
-    in_keys: Sequence[NestedKey], out_key: NestedKey = "observation_vector", **kwargs: Any
+    in_keys: Sequence[NestedKey], out_key: NestedKey = "observation_vector", *, sort: bool = False, **kwargs: Any
 ) -> Compose:
     """TorchRL's :class:`~torchrl.envs.CatTensors` as a replay buffer's ``transform``: on the root and on ``"next"``.
 
@@ -20,9 +20,16 @@ def replay_cat_tensors(
     env was stored with the old goal and stays stale for every relabelled transition. An env's
     ``CatTensors`` builds the vector on reset and step, that is on the root and on ``"next"``;
     a buffer transform sees both in one batch, so this is two ``CatTensors`` with the same
-    arguments (``kwargs``: ``dim``, ``del_keys``, ``sort``, ...), and it builds the vector the
-    env's transform would. The buffer runs it after HER's ``collate_fn``, and overwrites a vector
-    the env stored.
+    arguments, and it builds the vector the env's transform would. The buffer runs it after HER's
+    ``collate_fn``, and overwrites a vector the env stored.
+
+    Args:
+        in_keys (sequence of NestedKey): the entries to concatenate, in this order.
+        out_key (NestedKey, optional): the concatenated entry. Defaults to ``"observation_vector"``.
+        sort (bool, optional): whether to sort ``in_keys`` first, as ``CatTensors`` does by default.
+            Defaults to ``False``: the vector keeps the order given (``["observation", "desired_goal"]``
+            puts the goal last).
+        **kwargs: the other arguments of ``CatTensors`` (``dim``, ``del_keys``, ...).
 
     Example:
         >>> import torch
@@ -37,7 +44,7 @@ def replay_cat_tensors(
         >>> her = HindsightRelabel(reward, future_p=1.0)
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * T, ndim=2), dim_extend=0, batch_size=8,
         ...     sample_unit=her, collate_fn=her.collate,
-        ...     transform=replay_cat_tensors(["observation", "desired_goal"], "observation_goal", sort=False))
+        ...     transform=replay_cat_tensors(["observation", "desired_goal"], "observation_goal"))
         >>> _ = rb.extend(episodes)
         >>> batch = rb.sample()
         >>> batch["observation_goal"].shape, batch["next", "observation_goal"].shape
@@ -46,6 +53,6 @@ def replay_cat_tensors(
         True
     """
     return Compose(
-        CatTensors(in_keys, out_key, **kwargs),
-        CatTensors([next_key(key) for key in in_keys], next_key(out_key), **kwargs),
+        CatTensors(in_keys, out_key, sort=sort, **kwargs),
+        CatTensors([next_key(key) for key in in_keys], next_key(out_key), sort=sort, **kwargs),
     )

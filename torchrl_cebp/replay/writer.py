@@ -9,6 +9,7 @@ from tensordict import TensorDict, TensorDictBase, pad
 from tensordict.utils import NestedKey
 from torchrl.data import TensorDictRoundRobinWriter
 
+from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import require_time_at
 
 PARTIAL_EPISODES_FILE = "partial_episodes.pt"
@@ -78,6 +79,16 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
         return self.extend(data.unsqueeze(0)).squeeze(0)
 
     def extend(self, data: TensorDictBase) -> torch.Tensor:
+        # A refused batch changes nothing: neither the waiting frames nor the next row (the storage refuses a write
+        # before storing any row, after TorchRL's writer has moved its cursor).
+        partial, cursor, write_count = dict(self._partial), self._cursor, self._write_count
+        try:
+            return self._extend(data)
+        except Exception:
+            self._partial, self._cursor, self._write_count = partial, cursor, write_count
+            raise
+
+    def _extend(self, data: TensorDictBase) -> torch.Tensor:
         lanes = self._lanes(data)
         ends = lanes.get(self.end_key, None)
         if ends is None:
@@ -116,8 +127,38 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
 
     def _lanes(self, data: TensorDictBase) -> TensorDictBase:
         """``data`` as ``[lanes, time]``, after checking its time dimension is the last."""
-        require_time_at(data, data.ndim - 1)
-        return data.unsqueeze(0) if data.ndim == 1 else data.reshape(-1, data.shape[-1])
+        storage = getattr(self, "_storage", None)  # None until a buffer registers it
+        dim_extends = [] if storage is None else [b.dim_extend for b in _upstream.attached_buffers(storage)]
+        require_time_at(data, data.ndim - 1, dim_extends)
+        lanes = data.unsqueeze(0) if data.ndim == 1 else data.reshape(-1, data.shape[-1])
+        if "time" not in data.names and data.ndim > 1:
+            self._require_time_last(lanes, data.shape)
+        return lanes
+
+    def _require_time_last(self, lanes: TensorDictBase, shape: torch.Size) -> None:
+        """Refuses a batch without dimension names whose frames do not follow each other along its last dimension.
+
+        Within a lane, a frame that does not end its episode is followed by the frame whose state is its next-state;
+        a ``[T, envs]`` batch read as ``[envs, T]`` breaks that at almost every step.
+        """
+        ends = lanes.get(self.end_key, None)
+        if ends is None or lanes.shape[1] < 2:  # without its end flags, extend() refuses the batch
+            return
+        following = ~ends.reshape(*lanes.shape, -1).any(-1)[:, :-1]
+        after, before = lanes[:, 1:], lanes[:, :-1].get("next")
+        for key in before.keys(True, True):
+            now = after.get(key, None)
+            if now is None or not torch.is_floating_point(now):
+                continue
+            matches = (now == before.get(key)).reshape(*following.shape, -1).all(-1)
+            if (following & ~matches).any():
+                raise ValueError(
+                    f"the frames of the batch of shape {list(shape)} do not follow each other along its last "
+                    f"dimension ({key!r} differs from the previous frame's next {key!r}): EpisodeWriter reads the "
+                    "last dimension as time. Give the batch time last ([envs, T], e.g. batch.transpose(0, 1)), or "
+                    "name its dimensions as TorchRL's collectors do (names=[..., 'time'])"
+                )
+            return  # one entry present in both tells
 
     def _check_length(self, episode: TensorDictBase, shape: torch.Size) -> None:
         if episode.shape[0] > self.max_episode_steps:

@@ -26,10 +26,12 @@ class ScriptedPickPlace(TensorDictModuleBase):
     Writes a zero action while the observation holds NaN (cube not perceived), which the loop does not execute anyway.
 
     Args:
-        max_step: the displacement an action of 1 commands (the env's action scale).
-        hover: height above the cube to line up at before descending.
-        tolerance: how close the grip must be to the cube to close on it.
-        closed_width: finger-pad distance below which the cube counts as grasped.
+        max_step (float, optional): the displacement an action of 1 commands (the env's action scale).
+            Defaults to ``0.05``.
+        hover (float, optional): height above the cube to line up at before descending. Defaults to ``0.06``.
+        tolerance (float, optional): how close the grip must be to the cube to close on it. Defaults to ``0.012``.
+        closed_width (float, optional): finger-pad distance below which the cube counts as grasped.
+            Defaults to ``0.056``.
 
     Example:
         >>> from tensordict import TensorDict
@@ -63,6 +65,11 @@ class ScriptedPickPlace(TensorDictModuleBase):
         return torch.cat([move, torch.tensor([gripper])])
 
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Writes ``"action"`` ``[..., 4]`` for every observation and goal of ``tensordict``.
+
+        Args:
+            tensordict (TensorDictBase): holds ``"observation"`` and ``"desired_goal"``, any batch size.
+        """
         obs, goal = tensordict.get("observation"), tensordict.get("desired_goal")
         actions = [self._act(o, g) for o, g in zip(obs.reshape(-1, obs.shape[-1]), goal.reshape(-1, goal.shape[-1]))]
         tensordict.set("action", torch.stack(actions).reshape(*obs.shape[:-1], 4).to(obs.dtype))

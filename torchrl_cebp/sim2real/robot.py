@@ -23,6 +23,12 @@ class RobotState:
     ``finger_pos`` is each finger's opening from the centre (the Fetch/Panda finger joint), so the
     gripper width is their sum.
 
+    Args:
+        grip_pos (np.ndarray): the grip point's position ``[3]``.
+        grip_vel (np.ndarray): its velocity ``[3]``.
+        finger_pos (np.ndarray): each finger's opening from the centre ``[2]``.
+        finger_vel (np.ndarray): their velocities ``[2]``.
+
     Example:
         >>> state = RobotState(np.zeros(3), np.zeros(3), np.full(2, 0.02), np.zeros(2))
         >>> state.gripper_width
@@ -67,7 +73,12 @@ class RobotBackend(ABC):
 
     @abstractmethod
     def move(self, delta_xyz: np.ndarray, gripper: float) -> None:
-        """Moves the end effector by ``delta_xyz`` (already clamped to the workspace) and commands the gripper."""
+        """Moves the end effector by ``delta_xyz`` and commands the gripper.
+
+        Args:
+            delta_xyz (np.ndarray): the robot-frame displacement, already clamped to the workspace.
+            gripper (float): ``+1`` opens fully, ``-1`` closes.
+        """
 
     @abstractmethod
     def hold(self) -> None:
@@ -81,19 +92,25 @@ class RobotBackend(ABC):
 class FrankyBackend(RobotBackend):
     """The real Franka Panda through ``franky`` (``pip install torchrl-cebp[real]``, i.e. ``franky-control``).
 
-    Untested here: it needs the robot's network and a real-time kernel. Every move is an absolute
+    It needs the robot's network and a real-time kernel. Every move is an absolute
     Cartesian target (current position + displacement, orientation kept), because franky's relative
     motions are expressed in the end-effector frame, not the base frame the policy acts in. Moves block
     until reached; the gripper grasps with ``grasp_force`` when closing and opens fully otherwise.
 
     Args:
-        host: the robot controller's address.
-        home: grip-point start position (robot frame), the simulator's start above the table centre.
-        grip_offset: robot-frame offset from franky's end-effector frame to the simulator's grip point
-            (the cube centre when grasped; the sim's grip point is 2 cm above the fingertips).
-        dynamics_factor: fraction of the robot's velocity/acceleration/jerk limits used for every motion.
-        grasp_force: gripper force in newtons when closing.
-        grasp_width: expected object width for ``grasp`` (the cube edge).
+        host (str): the robot controller's address.
+        home (tuple of float, optional): grip-point start position (robot frame), the simulator's start above
+            the table centre. Defaults to ``(0.5, 0.0, 0.225)``.
+        grip_offset (tuple of float, optional): robot-frame offset from franky's end-effector frame to the
+            simulator's grip point (the cube centre when grasped; the sim's grip point is 2 cm above the
+            fingertips). Defaults to ``(0.0, 0.0, 0.02)``.
+        dynamics_factor (float, optional): fraction of the robot's velocity/acceleration/jerk limits used for
+            every motion. Defaults to ``0.1``.
+        grasp_force (float, optional): gripper force in newtons when closing. Defaults to ``20.0``.
+        grasp_width (float, optional): expected object width for ``grasp`` (the cube edge). Defaults to ``0.05``.
+
+    Raises:
+        ImportError: ``franky`` is not installed.
 
     Example:
         >>> backend = FrankyBackend("172.16.0.2")  # doctest: +SKIP
@@ -126,6 +143,7 @@ class FrankyBackend(RobotBackend):
         self.robot.move(self._franky.CartesianMotion(target, self._franky.ReferenceType.Absolute))
 
     def reset(self) -> None:
+        """Recovers from errors, moves the grip point to ``home`` and opens the gripper."""
         self.robot.recover_from_errors()
         self.stopped = False
         self._move_grip_to(self.home)
@@ -133,6 +151,7 @@ class FrankyBackend(RobotBackend):
         self._closed = False
 
     def state(self) -> RobotState:
+        """The grip point's pose and velocity, and the gripper's width, read from the robot."""
         cartesian = self.robot.current_cartesian_state
         width = float(self.gripper.width)
         return RobotState(
@@ -144,6 +163,15 @@ class FrankyBackend(RobotBackend):
         )
 
     def move(self, delta_xyz: np.ndarray, gripper: float) -> None:
+        """Moves to the current grip point plus ``delta_xyz`` (blocking), then grasps or opens on a change.
+
+        Args:
+            delta_xyz (np.ndarray): the robot-frame displacement, already clamped to the workspace.
+            gripper (float): below 0 grasps with ``grasp_force``, otherwise opens fully.
+
+        Raises:
+            RuntimeError: the robot was stopped and not reset since.
+        """
         if self.stopped:
             raise RuntimeError("The robot was stopped; reset() it before moving again.")
         self._move_grip_to(self.state().grip_pos + np.asarray(delta_xyz, dtype=np.float64))
@@ -156,10 +184,10 @@ class FrankyBackend(RobotBackend):
             self._closed = close
 
     def hold(self) -> None:
-        # franky's moves block until done, so between commands the arm already stands still.
-        pass
+        """Nothing to do: franky's moves block until done, so between commands the arm already stands still."""
 
     def stop(self) -> None:
+        """Stops the robot; :meth:`move` refuses until :meth:`reset`."""
         self.stopped = True
         self.robot.stop()
 

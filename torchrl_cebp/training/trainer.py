@@ -22,8 +22,8 @@ from torchrl.data.replay_buffers.samplers import Sampler
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from tqdm import tqdm
 
-from torchrl_cebp.replay import HindsightRelabel, update_td_priorities
-from torchrl_cebp.samplers import EpisodePrioritySampler, PERSampler, worker_sampler
+from torchrl_cebp.replay import HindsightRelabel
+from torchrl_cebp.replay.samplers import EpisodeSampler
 from torchrl_cebp.training.builders import (
     Agent,
     TaskDims,
@@ -40,11 +40,10 @@ from torchrl_cebp.training.builders import (
 )
 from torchrl_cebp.training.checkpoint import (
     BestPolicy,
+    RunCheckpoints,
     has_checkpoint,
-    load_checkpoint,
     policy_state,
     restore_training_state,
-    save_checkpoint,
     save_policy,
     training_state,
 )
@@ -64,6 +63,9 @@ class RelabelledTransitions:
     episodes, so the goal statistics cover the goals the networks are trained on
     (independently of how the sampler draws from the buffer). It relabels through the
     replay's own :meth:`HindsightRelabel.relabel`.
+
+    Args:
+        her (HindsightRelabel): the replay's relabelling.
 
     Example:
         >>> from torchrl_cebp.envs import make_env
@@ -85,8 +87,15 @@ class RelabelledTransitions:
 
 
 def sampling_spread(sampler: Sampler) -> dict[str, float]:
-    """Effective fraction of stored episodes an episode sampler draws from, ``1 / (N sum p^2)``."""
-    if not isinstance(worker_sampler(sampler), EpisodePrioritySampler) or not sampler.n_episodes:
+    """Effective fraction of stored episodes an episode sampler draws from, ``1 / (N sum p^2)``.
+
+    Args:
+        sampler (Sampler): the replay's sampler.
+
+    Returns:
+        ``{"priority_ess_fraction": ...}`` for an episode-priority sampler holding episodes, else ``{}``.
+    """
+    if not isinstance(sampler, EpisodeSampler) or not sampler.n_episodes:
         return {}
     n = sampler.n_episodes
     p = sampler.probabilities(torch.arange(n))
@@ -94,18 +103,48 @@ def sampling_spread(sampler: Sampler) -> dict[str, float]:
 
 
 def beta_annealing(sampler: Sampler) -> LinearScheduler | None:
-    """PER's linear beta schedule over its draws (every worker's at once), or ``None`` for other samplers."""
-    if isinstance(sampler, PERSampler):
-        return sampler.beta_scheduler()
-    per = worker_sampler(sampler)
-    if not isinstance(per, PERSampler):
-        return None
-    # One schedule sets every worker's beta (PerWorkerSampler.beta); the checkpoint keeps its step count.
-    return LinearScheduler(sampler, "beta", final_value=per.beta_end, num_steps=per.beta_anneal_draws)
+    """PER's linear beta schedule over its draws (every worker's at once), or ``None`` for other samplers.
+
+    Args:
+        sampler (Sampler): the replay's sampler, possibly a per-worker one.
+    """
+    # A per-worker sampler's schedule sets every worker's beta; the checkpoint keeps its step count.
+    scheduler = getattr(sampler, "beta_scheduler", None)
+    return None if scheduler is None else scheduler()
 
 
 class Learner:
-    """The gradient side of a cycle: store episodes, draw, update actor and critic, move the targets."""
+    """The gradient side of a cycle: store episodes, draw, update actor and critic, move the targets.
+
+    Args:
+        cfg (DictConfig): the training config.
+        agent (Agent): the modules it trains.
+        optimizer (torch.optim.Optimizer): over the actor's and critic's parameters.
+        replay (TensorDictReplayBuffer): the episode replay.
+        her (HindsightRelabel): the replay's relabelling, which also feeds the normaliser.
+        sampler (Sampler): the replay's sampler.
+        device (torch.device): where the updates run.
+
+    Example:
+        >>> from pathlib import Path
+        >>> from hydra import compose, initialize_config_dir
+        >>> import torchrl_cebp
+        >>> from torchrl_cebp.training.builders import make_optimizer
+        >>> conf = Path(torchrl_cebp.__file__).resolve().parents[1] / "conf"
+        >>> with initialize_config_dir(str(conf), version_base="1.3"):
+        ...     cfg = compose("config", overrides=["batch_size=8", "replay.capacity=5000", "agent.hidden=[32]"])
+        >>> env = make_env(cfg, 2)
+        >>> agent = make_agent(cfg, TaskDims.of(env))
+        >>> sampler = make_sampler(cfg)
+        >>> replay, her = make_replay(cfg, sampler, env)
+        >>> learner = Learner(cfg, agent, make_optimizer(cfg, agent.loss), replay, her, sampler, torch.device("cpu"))
+        >>> with torch.no_grad():
+        ...     episodes = env.rollout(50, agent.exploration)
+        >>> learner.store(episodes)
+        >>> learner.update()
+        >>> sorted(learner.totals)
+        ['action_l2', 'loss_actor', 'loss_value', 'q_mean']
+    """
 
     def __init__(self, cfg: DictConfig, agent: Agent, optimizer: torch.optim.Optimizer, replay: TensorDictReplayBuffer,
                  her: HindsightRelabel, sampler: Sampler, device: torch.device) -> None:
@@ -116,10 +155,16 @@ class Learner:
         self.totals: dict[str, torch.Tensor] = defaultdict(float)
 
     def store(self, episodes: TensorDictBase) -> None:
+        """Adds whole episodes to the replay and their relabelled transitions to the normaliser.
+
+        Args:
+            episodes (TensorDictBase): ``[n, T]`` episodes.
+        """
         self.replay.extend(episodes)
         self.agent.normalizer.update(self.normalizer_feed(episodes))
 
     def update(self) -> None:
+        """One draw and one gradient step of actor and critic; the drawn priorities are updated."""
         batch = self.replay.sample().to(self.device)
         if self.beta_scheduler is not None:
             self.beta_scheduler.step()
@@ -130,7 +175,7 @@ class Learner:
         self.optimizer.zero_grad()
         (losses["loss_actor"] + losses["loss_value"]).backward()
         self.optimizer.step()
-        update_td_priorities(self.replay, batch)
+        self.replay.update_tensordict_priority(batch)
         for key in ("loss_actor", "loss_value", "action_l2"):
             self.totals[key] += losses[key].detach()
         self.totals["q_mean"] += losses["pred_value"].mean()
@@ -153,7 +198,17 @@ class Learner:
 
 
 def run_epoch(cfg: DictConfig, epoch: int, learner: Learner, batches: EpisodeBatches) -> dict[str, float]:
-    """One epoch's cycles; returns its timings (seconds) and mean load."""
+    """One epoch's cycles.
+
+    Args:
+        cfg (DictConfig): the training config.
+        epoch (int): the epoch, which seeds its collection streams.
+        learner (Learner): stores the episodes and runs the updates.
+        batches (EpisodeBatches): collects the episodes.
+
+    Returns:
+        ``collect_s`` and ``update_s`` (seconds) and ``load_avg``, the mean load.
+    """
     overlap = cfg.overlap_collection
     collect_s = update_s = load = 0.0
     for cycle in range(cfg.cycles_per_epoch):
@@ -187,7 +242,15 @@ def run_epoch(cfg: DictConfig, epoch: int, learner: Learner, batches: EpisodeBat
 
 
 def prepare_run_dir(cfg: DictConfig, run_dir: str | Path) -> tuple[Path, bool]:
-    """Creates ``run_dir``; returns it and whether the run resumes from its checkpoint."""
+    """Creates ``run_dir``; returns it and whether the run resumes from its checkpoint.
+
+    Args:
+        cfg (DictConfig): the training config; reads ``resume``.
+        run_dir (str or Path): the run's folder.
+
+    Raises:
+        ConfigError: ``run_dir`` holds a checkpoint and ``cfg.resume`` is false.
+    """
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     if has_checkpoint(run_dir) and not cfg.resume:
@@ -201,9 +264,19 @@ def prepare_run_dir(cfg: DictConfig, run_dir: str | Path) -> tuple[Path, bool]:
 def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     """Trains DDPG+HER as configured by ``cfg`` (see ``conf/config.yaml``); returns the CSV path.
 
-    ``run_dir`` receives ``progress.csv`` (one row per epoch), ``checkpoint.pt`` and ``policy.pt``
-    (after each epoch), and ``best_policy.pt`` (the epoch with the highest test success so far). With
-    ``cfg.resume`` the run continues after the checkpoint's epoch.
+    ``run_dir`` receives ``progress.csv`` (one row per epoch), ``checkpoint.pt`` (the previous epoch's
+    beside it) and ``policy.pt`` (after each epoch), and ``best_policy.pt`` (the epoch with the highest test
+    success so far). With ``cfg.resume`` the run continues after the checkpoint's epoch (the previous one's,
+    when the newest does not load).
+
+    Args:
+        cfg (DictConfig): the composed training config.
+        run_dir (str or Path): the run's folder.
+
+    Raises:
+        ConfigError: an invalid config, a checkpoint in ``run_dir`` without ``cfg.resume``, or a checkpoint of
+            another run.
+        UnreadableFileError: with ``cfg.resume``, neither checkpoint of ``run_dir`` loads.
     """
     validate_config(cfg)
     torch.set_num_threads(cfg.threads)
@@ -212,6 +285,10 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     run_dir, resuming = prepare_run_dir(cfg, run_dir)
     device = resolve_device(cfg.device)
     warn_if_bf16_is_emulated(cfg.precision, device)
+    checkpoints = RunCheckpoints(run_dir)
+    # Read before the envs start, so that a run none of whose checkpoints loads stops at once. The newest
+    # checkpoint, or the previous epoch's if the newest does not load (the CSV then drops the later rows).
+    state = checkpoints.load(map_location=device) if resuming else None
 
     test_env = make_env(cfg, episodes_per_cycle(cfg), device)
     dims = TaskDims.of(test_env)
@@ -221,8 +298,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     learner = Learner(cfg, agent, optimizer, replay, her, sampler, device)
     batches = make_training_collector(cfg, agent, dims)
     start_epoch, wall_before = 0, 0.0
-    if resuming:  # after every part is built: building one may draw from the restored random streams
-        state = load_checkpoint(run_dir, map_location=device)
+    if state is not None:  # after every part is built: building one may draw from the restored random streams
         start_epoch, wall_before = restore_training_state(state, cfg, agent, optimizer, replay, learner.beta_scheduler)
     best_policy = BestPolicy(run_dir, resume=resuming)
     labels = {"replay": replay_layout(cfg), "replay_capacity": replay_capacity(cfg), "her_strategy": cfg.replay.strategy}
@@ -256,7 +332,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
         policy = policy_state(cfg, agent, epoch=epoch, test_success=success)
         save_policy(policy, run_dir)
         best_policy.offer(policy)
-        save_checkpoint(training_state(epoch, wall_s, cfg, agent, optimizer, replay, learner.beta_scheduler), run_dir)
+        checkpoints.save(training_state(epoch, wall_s, cfg, agent, optimizer, replay, learner.beta_scheduler))
         progress.set_postfix(success=f"{success:.3f}", steps_per_s=f"{env_steps / epoch_s:.0f}")
         tqdm.write(f"epoch {epoch:3d}  test success {success:.3f}  ({env_steps / epoch_s:.0f} env steps/s)")
 

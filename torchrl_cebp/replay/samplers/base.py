@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import abc
 import json
+import math
 import os
 from multiprocessing.context import get_spawning_popen
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import torch
 from tensordict import TensorDictBase
@@ -24,7 +25,7 @@ from torchrl.data.replay_buffers.samplers import Sampler, SumSegmentTreeFp64
 from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
-from torchrl_cebp.replay.episodes import common_length, episode_lengths, valid_steps
+from torchrl_cebp.replay.episodes import episode_lengths, shared_length, stored_lengths, valid_steps
 from torchrl_cebp.replay.storage import RowWriteWatch
 
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
@@ -65,6 +66,36 @@ def _shape_text(trailing_shape: tuple[int | None, ...]) -> str:
     return "[n_episodes, T, " + ", ".join("*" if d is None else str(d) for d in trailing_shape) + "]"
 
 
+def checked(owner: str, name: str, value: float, *, minimum: float = 0.0, exclusive: bool = False,
+            maximum: float = math.inf) -> float:
+    """``value`` as a float, after checking it lies in the allowed range (``minimum`` excluded if ``exclusive``).
+
+    Examples:
+        >>> checked("CEBPSampler", "beta", 1)
+        1.0
+        >>> checked("CEBPSampler", "beta", -1)
+        Traceback (most recent call last):
+        ...
+        ValueError: CEBPSampler beta=-1.0: allowed values lie in [0.0, inf)
+    """
+    value = float(value)
+    if not ((value > minimum if exclusive else value >= minimum) and value <= maximum):
+        bounds = f"{'(' if exclusive else '['}{minimum}, {maximum}{')' if maximum == math.inf else ']'}"
+        raise ValueError(f"{owner} {name}={value!r}: allowed values lie in {bounds}")
+    return value
+
+
+def batch_normalised_weights(probabilities: torch.Tensor, n_episodes: int, beta: float) -> torch.Tensor:
+    """Importance-sampling weights ``(N p)^-beta`` of drawn episodes, over the batch's largest (PER's form).
+
+    Examples:
+        >>> batch_normalised_weights(torch.tensor([0.5, 0.25]), 2, 1.0).tolist()
+        [0.5, 1.0]
+    """
+    weights = (n_episodes * probabilities) ** (-beta)
+    return weights / weights.max()
+
+
 def episode_positions(
     episodes: TensorDictBase, position_key: NestedKey, next_position_key: NestedKey
 ) -> torch.Tensor:
@@ -83,10 +114,16 @@ def episode_positions(
 
 
 def stored_rows(index: torch.Tensor) -> torch.Tensor:
-    """Episode rows touched by a write, from the ``[n * T, 2]`` index a buffer reports."""
+    """Episode rows touched by a write, in order, from the ``[n * T, 2]`` index a buffer reports.
+
+    Examples:
+        >>> stored_rows(torch.tensor([[3, 0], [3, 1], [0, 0], [0, 1]])).tolist()
+        [0, 3]
+    """
     index = torch.as_tensor(index)
-    rows = index[..., 0] if index.ndim > 1 else index
-    return torch.unique(rows.reshape(-1))
+    rows = (index[..., 0] if index.ndim > 1 else index).reshape(-1)
+    # A buffer's index lists each row's steps together: collapsing those runs first leaves one entry a row.
+    return torch.unique(rows.unique_consecutive())
 
 
 def split_index(index: torch.Tensor | tuple) -> tuple[torch.Tensor, torch.Tensor]:
@@ -94,6 +131,32 @@ def split_index(index: torch.Tensor | tuple) -> tuple[torch.Tensor, torch.Tensor
     if isinstance(index, tuple):
         return index[0], index[1]
     return index[..., 0], index[..., 1]
+
+
+@runtime_checkable
+class EpisodeSampler(Protocol):
+    """What a sampler that draws whole episodes answers besides TorchRL's :class:`~torchrl.data.replay_buffers.Sampler`.
+
+    Every :class:`EpisodePrioritySampler` is one, and so is a
+    :class:`~torchrl_cebp.replay.samplers.PerWorkerSampler` of them. A trainer reads it to log the draw's spread
+    and to refit a density model (MEP) once an epoch.
+
+    Examples:
+        >>> from torchrl.data import RandomSampler
+        >>> from torchrl_cebp.replay.samplers import UniformEpisodeSampler
+        >>> isinstance(UniformEpisodeSampler(), EpisodeSampler), isinstance(RandomSampler(), EpisodeSampler)
+        (True, False)
+    """
+
+    @property
+    def n_episodes(self) -> int:
+        """Episode rows written so far."""
+
+    def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
+        """Probability that one draw takes each of ``rows``."""
+
+    def refit(self, storage: Storage) -> None:
+        """Re-ranks the stored episodes from the whole ``storage`` (once an epoch)."""
 
 
 class EpisodePrioritySampler(Sampler, abc.ABC):
@@ -140,10 +203,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     def __init__(self, end_key: NestedKey = ("next", "done")) -> None:
         self.end_key = end_key
         self._priorities = torch.zeros(0, dtype=torch.float64)
-        self._lengths = torch.zeros(0, dtype=torch.long)
-        self._lengths_unread = False  # restored from a state without lengths: read them at the next draw
-        # The length every stored episode shares, if they share one: steps are then drawn without the lengths.
-        self._common_length: int | None = None
         self._cumulative_step_weights: torch.Tensor | None = None
         self._tree: SumSegmentTreeFp64 | None = None
         self._n_stored = 0
@@ -166,6 +225,19 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         """IS weights of the drawn episodes, or ``None`` when the method uses none."""
         return None
 
+    def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        """The entries :meth:`episode_priority` and :meth:`step_weights` read, with their per-step shapes."""
+        return {}
+
+    def check_episodes(self, episodes: TensorDictBase) -> None:
+        """Refuses ``[n, T]`` episodes that lack an entry this sampler reads, naming it and its shape.
+
+        The episode storages call it before they store a write, so that a write this sampler cannot
+        score stores nothing.
+        """
+        for key, shape in self.episode_keys().items():
+            require_key(episodes, key, shape)
+
     def refit(self, storage: Storage) -> None:
         """Re-ranks the stored episodes from the whole ``storage``; a trainer calls it once per epoch.
 
@@ -184,7 +256,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         if self._tree is None:
             self._tree = SumSegmentTreeFp64(n_rows)
             self._priorities = torch.zeros(n_rows, dtype=torch.float64)
-            self._lengths = torch.zeros(n_rows, dtype=torch.long)
         elif self._tree.size != n_rows:
             raise ValueError(
                 f"{type(self).__name__} holds priorities for {self._tree.size} episode rows (of another buffer, "
@@ -249,11 +320,20 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         # A write is usually one run of consecutive rows: read it as a view, not a copy.
         episodes = storage.get(slice(first, last + 1)) if last - first + 1 == rows.numel() else storage.get(rows)
         self._ensure_tree(storage)
-        self.write_priorities(rows, episodes)
+        self.write_priorities(rows, episodes, stored_lengths(storage, rows, self.end_key))
 
-    def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase) -> None:
-        """Computes and stores the priorities and valid lengths of ``episodes`` written at ``rows``."""
-        lengths = episode_lengths(episodes, self.end_key)
+    def write_priorities(
+        self, rows: torch.Tensor, episodes: TensorDictBase, lengths: torch.Tensor | None = None
+    ) -> None:
+        """Computes and stores the priorities of ``episodes`` written at ``rows``.
+
+        Args:
+            rows (torch.Tensor): where they are stored.
+            episodes (TensorDictBase): the ``[n, T]`` episodes.
+            lengths (torch.Tensor, optional): their valid lengths. Defaults to reading them from their flags.
+        """
+        if lengths is None:
+            lengths = episode_lengths(episodes, self.end_key)
         valid = valid_steps(lengths, episodes.shape[1])
         priority = self.episode_priority(episodes, valid).to(torch.float64)
         if priority.shape != rows.shape or not torch.isfinite(priority).all() or (priority < 0).any():
@@ -262,7 +342,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 f"non-negative priorities, got {priority}"
             )
         self.set_priorities(rows, priority)
-        self._lengths[rows] = lengths
         steps = self.step_weights(episodes, valid)
         if steps is not None:
             if self._cumulative_step_weights is None:
@@ -271,10 +350,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 )
             self._cumulative_step_weights[rows] = steps.double().cumsum(-1)
         self._n_stored = max(self._n_stored, int(rows.max()) + 1)
-        self._track_common_length()
-
-    def _track_common_length(self) -> None:
-        self._common_length = common_length(self._lengths[: self._n_stored])
 
     def set_priorities(self, rows: torch.Tensor, priority: torch.Tensor) -> None:
         """Overwrites the priorities of ``rows`` (used on write, and by samplers that re-rank)."""
@@ -296,11 +371,13 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         # Float round-off at the very top of the range can land past the last stored row.
         return rows.clamp_(max=self._n_stored - 1)
 
-    def draw_steps(self, rows: torch.Tensor) -> torch.Tensor:
-        """A valid step per drawn row: uniform, or by the cumulative step weights."""
-        if self._cumulative_step_weights is None and self._common_length is not None:
-            return torch.randint(self._common_length, rows.shape, generator=_upstream.sampler_generator(self))
-        lengths = self._lengths.index_select(0, rows)
+    def draw_steps(self, rows: torch.Tensor, storage: Storage) -> torch.Tensor:
+        """A valid step per drawn row: uniform, or by the cumulative step weights; the storage knows the lengths."""
+        if self._cumulative_step_weights is None:
+            shared = shared_length(storage, self.end_key)
+            if shared is not None:
+                return torch.randint(shared, rows.shape, generator=_upstream.sampler_generator(self))
+        lengths = stored_lengths(storage, rows, self.end_key)
         if self._cumulative_step_weights is None:
             return (self._uniform(rows.numel()) * lengths).long().clamp_(max=lengths - 1)
         cumulative = self._cumulative_step_weights[rows]
@@ -316,14 +393,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._catch_up(storage)
         if self._n_stored == 0:
             raise RuntimeError(EMPTY_STORAGE_ERROR)
-        if self._lengths_unread:
-            filled = episode_lengths(storage.get(slice(None)), self.end_key)  # the filled rows only
-            self._lengths = torch.full_like(self._lengths, storage.shape[1])
-            self._lengths[: filled.numel()] = filled
-            self._lengths_unread = False
-            self._track_common_length()
         rows = self.draw_episodes(batch_size)
-        steps = self.draw_steps(rows)
+        steps = self.draw_steps(rows, storage)
         info: dict[str, Any] = {}
         # Without an importance_weights of its own a sampler uses none: its draws skip the probabilities
         # (some 4% of a uniform draw of 256).
@@ -335,21 +406,15 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     # ---- state --------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
-        state = {"priorities": self._priorities.clone(), "lengths": self._lengths.clone(), "n_stored": self._n_stored}
+        state = {"priorities": self._priorities.clone(), "n_stored": self._n_stored}
         if self._cumulative_step_weights is not None:
             state["cumulative_step_weights"] = self._cumulative_step_weights.clone()
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        # Older states also carry the valid lengths, which the storage keeps: they are left unread.
         self._priorities = state_dict["priorities"].clone().to(torch.float64)
-        # States saved before episodes could end early carry no lengths: read them from the storage at the next draw.
-        lengths = state_dict.get("lengths")
-        self._lengths_unread = lengths is None
-        self._lengths = torch.zeros_like(self._priorities, dtype=torch.long) if lengths is None else lengths.clone()
         self._n_stored = int(state_dict["n_stored"])
-        self._common_length = None
-        if not self._lengths_unread:
-            self._track_common_length()
         steps = state_dict.get("cumulative_step_weights")
         self._cumulative_step_weights = None if steps is None else steps.clone()
         self._tree = SumSegmentTreeFp64(self._priorities.numel())
@@ -360,7 +425,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     def _owner_only_state(self) -> dict[str, Any]:
         """What a spawned copy holds in place of the per-row state only the drawing process keeps."""
         return dict(_priorities=torch.zeros(0, dtype=torch.float64), _tree=None,
-                    _lengths=torch.zeros(0, dtype=torch.long), _cumulative_step_weights=None, _n_stored=0,
+                    _cumulative_step_weights=None, _n_stored=0,
                     _writes_watch=None)
 
     def __getstate__(self) -> dict[str, Any]:
@@ -377,8 +442,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def _empty(self) -> None:
         self._priorities.zero_()
-        self._lengths.zero_()
-        self._common_length = None
         if self._tree is not None:
             self._tree = SumSegmentTreeFp64(self._priorities.numel())
         self._cumulative_step_weights = None

@@ -1,9 +1,12 @@
 """Contact Energy Based Prioritization (CEBP): the paper's equations, the released code's and the Initial commit's.
 
-Three formulas of one idea (ORIGINAL_CODE.md §1), one class each, over a shared base that reads the
-touch, the object's displacement and (for the code's forms) the gripper's workspace mask.
+Three formulas of one idea (the paper's equations, its released code, and that code's first commit), one class
+each, over a shared base that reads the touch, the object's displacement and (for the code's forms) the gripper's
+workspace mask.
 """
 from __future__ import annotations
+
+from typing import Any
 
 import torch
 from tensordict import TensorDictBase
@@ -12,6 +15,8 @@ from tensordict.utils import NestedKey
 from torchrl_cebp.replay.samplers.base import (
     FLOAT32_EPS,
     EpisodePrioritySampler,
+    batch_normalised_weights,
+    checked,
     episode_positions,
     require_key,
 )
@@ -29,12 +34,13 @@ class _ContactEnergySampler(EpisodePrioritySampler):
 
     def __init__(
         self,
-        workspace: Workspace | None,
-        touch_key: NestedKey,
-        position_key: NestedKey,
-        next_position_key: NestedKey,
-        next_observation_key: NestedKey,
-        end_key: NestedKey,
+        *,
+        workspace: Workspace | None = None,
+        touch_key: NestedKey = ("next", "touch"),
+        position_key: NestedKey = "achieved_goal",
+        next_position_key: NestedKey = ("next", "achieved_goal"),
+        next_observation_key: NestedKey | None = ("next", "observation"),
+        end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(end_key)
         self.touch_key = touch_key
@@ -44,6 +50,12 @@ class _ContactEnergySampler(EpisodePrioritySampler):
         self.workspace = None if workspace is None else tuple(tuple(float(v) for v in corner) for corner in workspace)
         if self.workspace is not None and (len(self.workspace) != 2 or any(len(c) != 3 for c in self.workspace)):
             raise ValueError(f"workspace={workspace!r}: expected ((min x, y, z), (max x, y, z)) or None")
+
+    def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        keys = {self.touch_key: (2,), self.position_key: (3,), self.next_position_key: (3,)}
+        if self.next_observation_key is not None:  # the gripper's position, for the workspace mask
+            keys[self.next_observation_key] = (None,)
+        return keys
 
     def _touch(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         """Left + right touch per valid step (0 on padding), ``[n, T]``."""
@@ -65,11 +77,10 @@ class _ContactEnergySampler(EpisodePrioritySampler):
 
     @staticmethod
     def _code_weights(probabilities: torch.Tensor, n_episodes: int, beta: float) -> torch.Tensor:
-        # The published code's rule: ones during warm-up, then (N p)^-beta over the batch maximum.
+        # The published code's rule: ones during warm-up, then the paper's weights.
         if n_episodes < CODE_MIN_EPISODES_FOR_WEIGHTS:
             return torch.ones_like(probabilities)
-        weights = (n_episodes * probabilities) ** (-beta)
-        return weights / weights.max()
+        return batch_normalised_weights(probabilities, n_episodes, beta)
 
 
 class CEBPSampler(_ContactEnergySampler):
@@ -95,7 +106,7 @@ class CEBPSampler(_ContactEnergySampler):
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-        >>> from torchrl_cebp.samplers import CEBPSampler
+        >>> from torchrl_cebp.replay.samplers import CEBPSampler
         >>> T = 50
         >>> episodes = TensorDict({
         ...     "achieved_goal": torch.zeros(4, T, 3),
@@ -120,13 +131,11 @@ class CEBPSampler(_ContactEnergySampler):
         next_position_key: NestedKey = ("next", "achieved_goal"),
         end_key: NestedKey = ("next", "done"),
     ) -> None:
-        super().__init__(None, touch_key, position_key, next_position_key, ("next", "observation"), end_key)
-        for name, value in (("scale", scale), ("temperature", temperature)):
-            if not value > 0:
-                raise ValueError(f"CEBPSampler {name}={value!r}: must be a positive number")
-        self.scale = float(scale)
-        self.temperature = float(temperature)
-        self.beta = float(beta)
+        super().__init__(touch_key=touch_key, position_key=position_key, next_position_key=next_position_key,
+                         next_observation_key=None, end_key=end_key)
+        self.scale = checked("CEBPSampler", "scale", scale, exclusive=True)
+        self.temperature = checked("CEBPSampler", "temperature", temperature, exclusive=True)
+        self.beta = checked("CEBPSampler", "beta", beta)
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
@@ -134,8 +143,7 @@ class CEBPSampler(_ContactEnergySampler):
         return (self.scale * torch.sigmoid(self.temperature * energy) * valid).sum(1)
 
     def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
-        weights = (n_episodes * probabilities) ** (-self.beta)
-        return weights / weights.max()
+        return batch_normalised_weights(probabilities, n_episodes, self.beta)
 
     def __repr__(self) -> str:
         return (
@@ -163,7 +171,7 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
-        >>> from torchrl_cebp.samplers import ReleasedCEBPSampler
+        >>> from torchrl_cebp.replay.samplers import ReleasedCEBPSampler
         >>> T = 50
         >>> grip = torch.tensor([1.2, 0.6, 0.5] + [0.0] * 22)  # inside Push's workspace box
         >>> episodes = TensorDict({
@@ -176,19 +184,9 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
         (True, True)
     """
 
-    def __init__(
-        self,
-        *,
-        k: float = 0.1,
-        workspace: Workspace | None = None,
-        touch_key: NestedKey = ("next", "touch"),
-        position_key: NestedKey = "achieved_goal",
-        next_position_key: NestedKey = ("next", "achieved_goal"),
-        next_observation_key: NestedKey = ("next", "observation"),
-        end_key: NestedKey = ("next", "done"),
-    ) -> None:
-        super().__init__(workspace, touch_key, position_key, next_position_key, next_observation_key, end_key)
-        self.k = float(k)
+    def __init__(self, *, k: float = 0.1, **keys: Any) -> None:
+        super().__init__(**keys)
+        self.k = checked("ReleasedCEBPSampler", "k", k, exclusive=True)
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         displacement = self._displacement(episodes, valid)
@@ -222,7 +220,7 @@ class InitialCEBPSampler(_ContactEnergySampler):
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-        >>> from torchrl_cebp.samplers import InitialCEBPSampler
+        >>> from torchrl_cebp.replay.samplers import InitialCEBPSampler
         >>> T = 50
         >>> touch = torch.zeros(2, T, 2); touch[1] = 1.0  # only episode 1 touches
         >>> episodes = TensorDict({
@@ -237,19 +235,9 @@ class InitialCEBPSampler(_ContactEnergySampler):
         [1, 1, 1, 1, 1, 1, 1, 1]
     """
 
-    def __init__(
-        self,
-        *,
-        beta: float = INITIAL_BETA,
-        workspace: Workspace | None = None,
-        touch_key: NestedKey = ("next", "touch"),
-        position_key: NestedKey = "achieved_goal",
-        next_position_key: NestedKey = ("next", "achieved_goal"),
-        next_observation_key: NestedKey = ("next", "observation"),
-        end_key: NestedKey = ("next", "done"),
-    ) -> None:
-        super().__init__(workspace, touch_key, position_key, next_position_key, next_observation_key, end_key)
-        self.beta = float(beta)
+    def __init__(self, *, beta: float = INITIAL_BETA, **keys: Any) -> None:
+        super().__init__(**keys)
+        self.beta = checked("InitialCEBPSampler", "beta", beta)
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)

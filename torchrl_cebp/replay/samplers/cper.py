@@ -5,7 +5,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
-from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, require_key
+from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, checked, require_key
 
 
 class CPERSampler(EpisodePrioritySampler):
@@ -24,7 +24,7 @@ class CPERSampler(EpisodePrioritySampler):
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-        >>> from torchrl_cebp.samplers import CPERSampler
+        >>> from torchrl_cebp.replay.samplers import CPERSampler
         >>> episodes = TensorDict({"next": {"touch": torch.rand(3, 50, 2)}}, [3, 50])
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
         ...                             sampler=CPERSampler(), batch_size=4, dim_extend=0)
@@ -42,9 +42,12 @@ class CPERSampler(EpisodePrioritySampler):
         end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(end_key)
-        self.threshold = float(threshold)
-        self.lam = float(lam)
+        self.threshold = checked("CPERSampler", "threshold", threshold)
+        self.lam = checked("CPERSampler", "lam", lam, exclusive=True)
         self.touch_key = touch_key
+
+    def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        return {self.touch_key: (2,)}
 
     def step_weights(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         touch = require_key(episodes, self.touch_key, (2,)).double().sum(-1)

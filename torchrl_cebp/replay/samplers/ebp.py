@@ -5,7 +5,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
-from torchrl_cebp.replay.samplers.base import FLOAT32_EPS, EpisodePrioritySampler, episode_positions
+from torchrl_cebp.replay.samplers.base import FLOAT32_EPS, EpisodePrioritySampler, checked, episode_positions
 
 GRAVITY = 9.81
 MASS = 1.0
@@ -31,7 +31,7 @@ class EBPSampler(EpisodePrioritySampler):
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-        >>> from torchrl_cebp.samplers import EBPSampler
+        >>> from torchrl_cebp.replay.samplers import EBPSampler
         >>> episodes = TensorDict({"achieved_goal": torch.rand(3, 50, 3),
         ...                        "next": {"achieved_goal": torch.rand(3, 50, 3)}}, [3, 50])
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
@@ -53,12 +53,15 @@ class EBPSampler(EpisodePrioritySampler):
         end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(end_key)
-        self.clip_energy = float(clip_energy)
-        self.temperature = float(temperature)
-        self.w_potential = float(w_potential)
-        self.w_kinetic = float(w_kinetic)
+        self.clip_energy = checked("EBPSampler", "clip_energy", clip_energy, exclusive=True)
+        self.temperature = checked("EBPSampler", "temperature", temperature)
+        self.w_potential = checked("EBPSampler", "w_potential", w_potential)
+        self.w_kinetic = checked("EBPSampler", "w_kinetic", w_kinetic)
         self.position_key = position_key
         self.next_position_key = next_position_key
+
+    def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        return {self.position_key: (3,), self.next_position_key: (3,)}
 
     def trajectory_energy(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         """The clipped, summed energy increases over each episode's valid steps (shape ``[n]``)."""

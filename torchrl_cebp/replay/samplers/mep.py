@@ -10,8 +10,8 @@ from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.data.replay_buffers.storages import Storage
 
-from torchrl_cebp.replay.episodes import valid_steps
-from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, episode_positions
+from torchrl_cebp.replay.episodes import episode_lengths, stored_lengths, valid_steps
+from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, checked, episode_positions
 
 # The paper's code adds it to the dense rank (from 0), so that the most common trajectories stay drawable.
 RANK_OFFSET = 0.001
@@ -32,7 +32,7 @@ class MEPSampler(EpisodePrioritySampler):
     fit, floored at 0. After every write, every stored episode is ranked
     (dense ranks from 0, over the whole buffer) and ``p(e)`` is proportional to
     ``(rank + 0.001) ^ (1 / (temperature + 0.01))``: the ``entropy`` mode of
-    HER_force (ORIGINAL_CODE.md §4). Episodes written between refits are scored
+    HER_force (the paper's released code). Episodes written between refits are scored
     by the current mixture. Before the first refit every episode has rank 0, so
     draws are uniform. No importance-sampling weights.
 
@@ -53,7 +53,7 @@ class MEPSampler(EpisodePrioritySampler):
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-        >>> from torchrl_cebp.samplers import MEPSampler
+        >>> from torchrl_cebp.replay.samplers import MEPSampler
         >>> episodes = TensorDict({"achieved_goal": torch.rand(20, 50, 3),
         ...                        "next": {"achieved_goal": torch.rand(20, 50, 3)}}, [20, 50])
         >>> sampler = MEPSampler()
@@ -79,11 +79,11 @@ class MEPSampler(EpisodePrioritySampler):
         end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(end_key)
-        self.n_components = int(n_components)
-        self.temperature = float(temperature)
-        self.max_fit_episodes = int(max_fit_episodes)
-        self.max_iter = int(max_iter)
-        self.reg_covar = float(reg_covar)
+        self.n_components = int(checked("MEPSampler", "n_components", n_components, minimum=1))
+        self.temperature = checked("MEPSampler", "temperature", temperature)
+        self.max_fit_episodes = int(checked("MEPSampler", "max_fit_episodes", max_fit_episodes, minimum=1))
+        self.max_iter = int(checked("MEPSampler", "max_iter", max_iter, minimum=1))
+        self.reg_covar = checked("MEPSampler", "reg_covar", reg_covar, exclusive=True)
         self.seed = int(seed)
         self.position_key = position_key
         self.next_position_key = next_position_key
@@ -91,6 +91,9 @@ class MEPSampler(EpisodePrioritySampler):
         self._lowest_fit_score = 0.0
         self._scores = torch.zeros(0, dtype=torch.float64)  # per episode row; 0 until the first refit
         self._n_refits = 0
+
+    def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        return {self.position_key: (3,), self.next_position_key: (3,)}
 
     def _new_mixture(self, covariance_prior: np.ndarray | None = None) -> BayesianGaussianMixture:
         return BayesianGaussianMixture(
@@ -117,12 +120,16 @@ class MEPSampler(EpisodePrioritySampler):
         # episodes are scored (write_priorities).
         return torch.ones(episodes.shape[0], dtype=torch.float64)
 
-    def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase) -> None:
-        super().write_priorities(rows, episodes)
+    def write_priorities(
+        self, rows: torch.Tensor, episodes: TensorDictBase, lengths: torch.Tensor | None = None
+    ) -> None:
+        if lengths is None:
+            lengths = episode_lengths(episodes, self.end_key)
+        super().write_priorities(rows, episodes, lengths)
         if self._scores.numel() != self._priorities.numel():
             self._scores = torch.zeros_like(self._priorities)
         if self._mixture is not None:
-            valid = valid_steps(self._lengths[rows], episodes.shape[1])
+            valid = valid_steps(lengths, episodes.shape[1])
             raw = self._raw_scores(self._trajectories(episodes, valid))
             self._scores[rows] = (raw - self._lowest_fit_score).clamp(min=0.0)
         self._rank_stored()
@@ -138,7 +145,8 @@ class MEPSampler(EpisodePrioritySampler):
         if self.n_episodes < self.n_components:
             return
         rows = torch.arange(self.n_episodes)
-        trajectories = self._trajectories(storage.get(rows), valid_steps(self._lengths[rows], storage.shape[1]))
+        valid = valid_steps(stored_lengths(storage, rows, self.end_key), storage.shape[1])
+        trajectories = self._trajectories(storage.get(rows), valid)
         fit_rows = np.random.default_rng(self.seed + self._n_refits).permutation(len(rows))
         fit_data = trajectories[fit_rows[: self.max_fit_episodes]]
         prior = np.cov(fit_data.T) + self.reg_covar * np.eye(fit_data.shape[1])
@@ -160,7 +168,7 @@ class MEPSampler(EpisodePrioritySampler):
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         if "scores" not in state_dict:
             raise ValueError(
-                "this MEP state is from before MEPSampler ranked the whole buffer on every write (2026-12-06); "
+                "this MEP state is from a version of MEPSampler that did not rank the whole buffer on every write; "
                 "it holds no per-episode scores to rank: start the run again"
             )
         super().load_state_dict(state_dict)

@@ -12,8 +12,8 @@ from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
-from torchrl_cebp.replay.episodes import episode_lengths, valid_steps
-from torchrl_cebp.replay.samplers.base import stored_rows
+from torchrl_cebp.replay.episodes import stored_lengths, valid_steps
+from torchrl_cebp.replay.samplers.base import checked, stored_rows
 
 # Written beside TorchRL's files by PERSampler.dumps.
 SCHEDULER_FILE = "beta_scheduler.json"
@@ -26,9 +26,8 @@ class PERSampler(PrioritizedSampler):
     transitions enter at the highest priority seen, and the padding steps of
     episodes that ended early at probability 0. Feed priorities back after
     each update with ``rb.update_tensordict_priority(batch)`` (the batch holds
-    ``"td_error"`` once a TorchRL loss ran on it) or ``rb.update_priority``; inside a
-    :class:`~torchrl_cebp.samplers.PerWorkerSampler`, only the latter reaches it
-    (:func:`~torchrl_cebp.replay.update_td_priorities` does that).
+    ``"td_error"`` once a TorchRL loss ran on it) or ``rb.update_priority``, inside a
+    :class:`~torchrl_cebp.replay.samplers.PerWorkerSampler` too.
     Beta grows linearly from ``beta`` to ``beta_end`` over ``beta_anneal_draws``
     draws, as in baselines' PER over training, through the TorchRL scheduler
     :meth:`beta_scheduler` returns: step it once per draw.
@@ -41,19 +40,20 @@ class PERSampler(PrioritizedSampler):
     :meth:`dumps` writes TorchRL's files, which either sampler :meth:`loads`.
 
     Args:
-        capacity: storage capacity in transitions (the buffer's, e.g. 1e6).
-        alpha: priority exponent (0.6).
-        beta: initial IS exponent (0.4).
-        beta_end: final IS exponent (1.0).
-        beta_anneal_draws: number of draws over which beta is annealed.
-        eps: added to |TD error| (1e-6 as in baselines).
-        end_key: the flag that ends an episode before its row does.
+        capacity (int, optional): storage capacity in transitions, the buffer's. Defaults to ``1_000_000``.
+        alpha (float, optional): priority exponent. Defaults to ``0.6``.
+        beta (float, optional): initial IS exponent. Defaults to ``0.4``.
+        beta_end (float, optional): final IS exponent. Defaults to ``1.0``.
+        beta_anneal_draws (int, optional): number of draws over which beta is annealed. Defaults to ``100_000``.
+        eps (float, optional): added to ``|TD error|``. Defaults to ``1e-6``, as in baselines.
+        end_key (NestedKey, optional): the flag that ends an episode before its row does.
+            Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-        >>> from torchrl_cebp.samplers import PERSampler
+        >>> from torchrl_cebp.replay.samplers import PERSampler
         >>> episodes = TensorDict({"observation": torch.randn(3, 50, 25)}, [3, 50])
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
         ...                             sampler=PERSampler(10 * 50), batch_size=4, dim_extend=0,
@@ -79,9 +79,11 @@ class PERSampler(PrioritizedSampler):
         *,
         end_key: NestedKey = ("next", "done"),
     ) -> None:
-        super().__init__(int(capacity), alpha=alpha, beta=float(beta), eps=eps)
-        self.beta_end = float(beta_end)
-        self.beta_anneal_draws = int(beta_anneal_draws)
+        capacity = int(checked("PERSampler", "capacity", capacity, minimum=1))
+        alpha, beta = checked("PERSampler", "alpha", alpha), checked("PERSampler", "beta", beta)
+        super().__init__(capacity, alpha=alpha, beta=beta, eps=checked("PERSampler", "eps", eps, exclusive=True))
+        self.beta_end = checked("PERSampler", "beta_end", beta_end)
+        self.beta_anneal_draws = int(checked("PERSampler", "beta_anneal_draws", beta_anneal_draws, minimum=1))
         self.end_key = end_key
         self._beta_scheduler = self._new_beta_scheduler()
 
@@ -107,7 +109,7 @@ class PERSampler(PrioritizedSampler):
                 f"episodes): build it with capacity={storage.max_size}"
             )
         rows = stored_rows(index)
-        padding = ~valid_steps(episode_lengths(storage.get(rows), self.end_key), row_length)
+        padding = ~valid_steps(stored_lengths(storage, rows, self.end_key), row_length)
         if padding.any():
             rows_of, steps_of = padding.nonzero(as_tuple=True)
             _upstream.exclude_from_draws(self, rows[rows_of] * row_length + steps_of)

@@ -1,8 +1,8 @@
 """Baselines' per-MPI-worker replay, emulated in one buffer: each worker's episodes, sampler and draw apart.
 
-In baselines' HER (ORIGINAL_CODE.md §3) each of the ``W`` MPI workers owns a replay buffer of the
-episodes its own envs collected, computes priorities over it, draws its own batch and normalises its
-importance-sampling weights within it (by the batch's largest weight for CEBP, by the smallest priority in its
+In baselines' HER (OpenAI baselines' ``her``, which the paper's code extends) each of the ``W`` MPI
+workers owns a replay buffer of the episodes its own envs collected, computes priorities over it, draws its
+own batch and normalises its importance-sampling weights within it (by the batch's largest weight for CEBP, by the smallest priority in its
 own trees for PER); the workers' gradients are then summed. For uniform HER one merged buffer drawing
 ``W x batch`` is the same distribution; for a prioritised sampler it is not (one merged batch puts its
 weight scale on its single least likely sample, and turns the weights on once ``W x 256`` episodes are
@@ -19,38 +19,94 @@ transforms, the ``[B, 2]`` index and the checkpoints exactly as they are.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
 from tensordict import TensorDictBase
-from torchrl.data.replay_buffers.samplers import Sampler
+from tensordict.utils import NestedKey
+from torchrl.data.replay_buffers.samplers import PrioritizedSampler, Sampler
+from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl.data.replay_buffers.storages import Storage
 
-from torchrl_cebp.replay.samplers.base import split_index
+from torchrl_cebp import _upstream
+from torchrl_cebp.replay.episodes import shared_length, stored_lengths
+from torchrl_cebp.replay.samplers.base import EpisodeSampler, split_index
 from torchrl_cebp.replay.storage import RowWrites, RowWriteWatch
 
 
-def storage_rows(
-    local_rows: torch.Tensor, worker: int | torch.Tensor, workers: int, episodes_per_worker: int
-) -> torch.Tensor:
-    """The storage rows of ``worker``'s (one, or one per row) ``local_rows`` (see :class:`WorkerRows`)."""
-    e = episodes_per_worker
-    return local_rows // e * (e * workers) + worker * e + local_rows % e
+@dataclass(frozen=True)
+class WorkerLayout:
+    """Which worker owns each episode row: ``episodes_per_worker`` consecutive rows each, dealt out in turn.
+
+    Global row ``g`` belongs to worker ``(g // e) % W`` as its local row ``(g // (e W)) e + g % e``. A buffer that
+    writes ``e x W`` episodes per cycle, env ``i`` of the cycle being episode ``i``, thus gives worker ``w`` the
+    episodes of its envs ``w e .. w e + e - 1``. With a row count that is not a multiple of ``e x W`` the workers'
+    shares differ by up to ``e`` rows, and once the writer wraps around the storage a cycle's envs reach the workers
+    shifted; the default capacities (1e6 transitions of 50- or 100-step episodes, 16 envs) are multiples, 70-step
+    Slide's 14,286 rows are not.
+
+    Args:
+        workers (int): the number of workers ``W``.
+        episodes_per_worker (int, optional): each worker's consecutive rows ``e``. Defaults to 1.
+
+    Examples:
+        >>> layout = WorkerLayout(workers=8, episodes_per_worker=2)
+        >>> layout.rows_of_worker(14286, 0), layout.rows_of_worker(14286, 7)
+        (1786, 1784)
+        >>> rows = torch.tensor([0, 3, 17])
+        >>> workers = layout.worker_of(rows)
+        >>> workers.tolist(), layout.global_rows(layout.local_rows(rows), workers).tolist()
+        ([0, 1, 0], [0, 3, 17])
+    """
+
+    workers: int
+    episodes_per_worker: int = 1
+
+    def __post_init__(self) -> None:
+        for name in ("workers", "episodes_per_worker"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name}={getattr(self, name)}: must be a positive integer")
+
+    @property
+    def cycle(self) -> int:
+        """Rows per turn of all the workers, ``e x W``."""
+        return self.workers * self.episodes_per_worker
+
+    def worker_of(self, rows: torch.Tensor) -> torch.Tensor:
+        """The worker owning each of the storage ``rows``."""
+        return rows // self.episodes_per_worker % self.workers
+
+    def local_rows(self, rows: torch.Tensor) -> torch.Tensor:
+        """Each of the storage ``rows`` as a row of its worker."""
+        e = self.episodes_per_worker
+        return rows // self.cycle * e + rows % e
+
+    def global_rows(self, local_rows: torch.Tensor, worker: int | torch.Tensor) -> torch.Tensor:
+        """The storage rows of ``worker``'s (one, or one per row) ``local_rows``."""
+        e = self.episodes_per_worker
+        return local_rows // e * self.cycle + worker * e + local_rows % e
+
+    def rows_of_worker(self, rows: int, worker: int) -> int:
+        """How many of a storage's first ``rows`` rows are ``worker``'s; worker 0 has the most."""
+        full, rest = divmod(rows, self.cycle)
+        e = self.episodes_per_worker
+        return full * e + min(max(rest - worker * e, 0), e)
 
 
-class WorkerRows:
-    """Worker ``w``'s episode rows of a ``[rows, T]`` storage, as a storage of their own (a view, no copy).
+class WorkerRows(Storage):
+    """Worker ``w``'s episode rows of a ``[rows, T]`` storage, as a read-only TorchRL storage of their own (a view).
 
-    Rows are dealt out in turn, ``episodes_per_worker`` consecutive rows each: global row ``g``
-    belongs to worker ``(g // e) % W`` as its local row ``(g // (e W)) e + g % e``. A buffer that
-    writes ``e x W`` episodes per cycle, env ``i`` of the cycle being episode ``i``, thus gives worker
-    ``w`` the episodes of its envs ``w e .. w e + e - 1``. With a row count that is not a multiple of
-    ``e x W`` the workers' shares differ by up to ``e`` rows, and once the writer wraps around the
-    storage a cycle's envs reach the workers shifted; the default capacities (1e6 transitions of 50-
-    or 100-step episodes, 16 envs) are multiples, 70-step Slide's 14,286 rows are not. It answers
-    what a sampler asks of an episode storage (``ndim``, ``shape`` and ``max_size`` of the filled and
-    the whole local rows, ``len``, ``get``) in local rows.
+    Rows are dealt to the workers by a :class:`WorkerLayout`. Any sampler reading a storage through
+    TorchRL's :class:`~torchrl.data.replay_buffers.Storage` interface (``ndim``, ``shape``, ``max_size``,
+    ``len``, ``get``, the random draw of :class:`~torchrl.data.RandomSampler`) reads the worker's rows in its own
+    numbering; writes go through the whole storage.
+
+    Args:
+        storage (Storage): the episode storage (``ndim=2``).
+        worker (int): whose rows.
+        layout (WorkerLayout): how the rows are dealt out.
 
     Examples:
         >>> import torch
@@ -58,37 +114,33 @@ class WorkerRows:
         >>> from torchrl_cebp.replay import EpisodeStorage
         >>> storage = EpisodeStorage(8 * 5)  # 8 rows of 5 steps
         >>> storage.set(torch.arange(4), TensorDict({"x": torch.arange(4.0)[:, None].expand(4, 5)}, [4, 5]))
-        >>> worker1 = WorkerRows(storage, worker=1, workers=2, episodes_per_worker=1)
+        >>> worker1 = WorkerRows(storage, worker=1, layout=WorkerLayout(workers=2))
         >>> worker1.shape, worker1.max_size, worker1.get(slice(None))["x"][:, 0].tolist()
         (torch.Size([2, 5]), 20, [1.0, 3.0])
     """
 
     ndim = 2
 
-    def __init__(self, storage: Storage, worker: int, workers: int, episodes_per_worker: int) -> None:
-        self.storage = storage
-        self.worker, self.workers, self.episodes_per_worker = worker, workers, episodes_per_worker
-        self._row_writes: WorkerRowWrites | None = None
+    # Storage.__init__ is not called: it sets max_size, which a view reads from the storage it views.
+    def __init__(self, storage: Storage, worker: int, layout: WorkerLayout) -> None:
+        self.storage, self.worker, self.layout = storage, worker, layout
 
     @property
-    def row_writes(self) -> WorkerRowWrites | None:
-        """The storage's shared write counts of this worker's rows (``None`` if it keeps none), always the same
-        object: through it the worker's sampler learns of the rows another process wrote, as over a whole storage."""
-        writes = getattr(self.storage, "row_writes", None)
-        if writes is None:
-            return None
-        if self._row_writes is None or self._row_writes.writes is not writes:
-            every_row = torch.arange(self.rows_within(self.storage.max_size // self.storage.shape[1]))
-            self._row_writes = WorkerRowWrites(writes, self.global_rows(every_row))
-        return self._row_writes
+    def _rng(self) -> torch.Generator | None:
+        """The generator the buffer gave the whole storage: a stock sampler's draws over the view use it."""
+        return _upstream.buffer_generator(self.storage)
+
+    @property
+    def device(self) -> torch.device:
+        return self.storage.device
 
     def global_rows(self, local_rows: torch.Tensor) -> torch.Tensor:
         """The storage rows of this worker's ``local_rows``."""
-        return storage_rows(local_rows, self.worker, self.workers, self.episodes_per_worker)
+        return self.layout.global_rows(local_rows, self.worker)
 
     def rows_within(self, global_rows: int) -> int:
         """How many of the first ``global_rows`` storage rows are this worker's."""
-        return rows_of_worker(global_rows, self.worker, self.workers, self.episodes_per_worker)
+        return self.layout.rows_of_worker(global_rows, self.worker)
 
     @property
     def shape(self) -> torch.Size:
@@ -109,16 +161,50 @@ class WorkerRows:
             return self.storage.get((self.global_rows(torch.as_tensor(index[0])), *index[1:]))
         return self.storage.get(self.global_rows(torch.as_tensor(index)))
 
+    @property
+    def end_key(self) -> NestedKey | None:
+        """The flag at which the storage cuts its episodes (``None`` for a storage that cuts none)."""
+        return getattr(self.storage, "end_key", None)
 
-def rows_of_worker(rows: int, worker: int, workers: int, episodes_per_worker: int) -> int:
-    """How many of a storage's first ``rows`` rows are ``worker``'s (see :class:`WorkerRows`); worker 0 has the most.
+    def valid_lengths(self, rows: torch.Tensor) -> torch.Tensor:
+        """Valid steps of this worker's episodes in ``rows``, as the storage knows them."""
+        return stored_lengths(self.storage, self.global_rows(rows), self.end_key)
 
-    Example:
-        >>> rows_of_worker(14286, 0, 8, 2), rows_of_worker(14286, 7, 8, 2)
-        (1786, 1784)
-    """
-    full, rest = divmod(rows, workers * episodes_per_worker)
-    return full * episodes_per_worker + min(max(rest - worker * episodes_per_worker, 0), episodes_per_worker)
+    def common_length(self) -> int | None:
+        """The valid length every episode of the storage shares, else ``None``."""
+        return shared_length(self.storage, self.end_key)
+
+    def _rand_given_ndim(self, batch_size: int) -> tuple[torch.Tensor, torch.Tensor]:
+        return tuple(torch.randint(size, (batch_size,), generator=self._rng) for size in self.shape)
+
+    def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
+        raise RuntimeError("WorkerRows is a read-only view of a worker's rows: write into the whole storage")
+
+    def state_dict(self) -> dict[str, Any]:
+        return {}  # a view: the whole storage saves the rows
+
+    def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        if state_dict:
+            raise ValueError(f"WorkerRows keeps no state of its own, got {sorted(state_dict)}")
+
+    def _empty(self) -> None:
+        raise RuntimeError("WorkerRows is a read-only view of a worker's rows: empty the whole storage")
+
+    def contains(self, item: Any) -> bool:
+        raise NotImplementedError("WorkerRows answers no membership: ask the whole storage")
+
+    @property
+    def row_writes(self) -> WorkerRowWrites | None:
+        """The storage's shared write counts of this worker's rows (``None`` if it keeps none), always the same
+        object: through it the worker's sampler learns of the rows another process wrote, as over a whole storage."""
+        writes = getattr(self.storage, "row_writes", None)
+        if writes is None:
+            return None
+        cached = self.__dict__.get("_row_writes")
+        if cached is None or cached.writes is not writes:
+            every_row = torch.arange(self.rows_within(self.storage.max_size // self.storage.shape[1]))
+            cached = self.__dict__["_row_writes"] = WorkerRowWrites(writes, self.global_rows(every_row))
+        return cached
 
 
 class WorkerRowWrites:
@@ -153,9 +239,9 @@ class PerWorkerSampler(Sampler):
     priorities, density model (MEP), segment trees (PER), episode count and importance-sampling
     normalisation are its own. A draw of ``batch_size`` concatenates the ``W`` workers' draws of
     ``batch_size // W``, worker 0 first, with ``"priority_weight"`` normalised by each worker's own sampler.
-    Feed TD errors back to PER shards with :func:`~torchrl_cebp.replay.update_td_priorities`
-    (``rb.update_priority``): TorchRL's ``rb.update_tensordict_priority`` skips any sampler that is
-    not a :class:`~torchrl.data.PrioritizedSampler`, this one included.
+    Of PERs it is a :class:`PrioritizedPerWorkerSampler` (a TorchRL ``PrioritizedSampler``), so that
+    ``rb.update_tensordict_priority(batch)`` feeds each worker's PER; of episode samplers it is an
+    :class:`EpisodePerWorkerSampler` (an :class:`~torchrl_cebp.replay.samplers.EpisodeSampler`).
 
     The loss over such a batch is its plain mean: with equal parts that is the mean of the ``W``
     per-worker means, which baselines' sum of the ``W`` workers' gradients equals up to the factor
@@ -172,7 +258,7 @@ class PerWorkerSampler(Sampler):
         >>> from tensordict import TensorDict
         >>> from torchrl.data import TensorDictReplayBuffer
         >>> from torchrl_cebp.replay import EpisodeStorage
-        >>> from torchrl_cebp.samplers import InitialCEBPSampler, PerWorkerSampler
+        >>> from torchrl_cebp.replay.samplers import InitialCEBPSampler, PerWorkerSampler
         >>> n, T = 8, 50
         >>> episodes = TensorDict({"achieved_goal": torch.rand(n, T, 3), "touch": torch.rand(n, T, 2),
         ...     "observation": torch.rand(n, T, 25),
@@ -186,21 +272,34 @@ class PerWorkerSampler(Sampler):
         True
     """
 
+    def __new__(cls, *samplers: Sampler, episodes_per_worker: int = 1) -> PerWorkerSampler:
+        # What the workers' samplers are, it is too: a PrioritizedSampler of PERs, so that TorchRL's
+        # rb.update_tensordict_priority(batch), which feeds only those, reaches them; an EpisodeSampler of episode
+        # samplers, which the trainer asks for the draw's probabilities.
+        if cls is PerWorkerSampler and samplers:
+            if all(isinstance(sampler, PrioritizedSampler) for sampler in samplers):
+                cls = PrioritizedPerWorkerSampler
+            elif all(isinstance(sampler, EpisodeSampler) for sampler in samplers):
+                cls = EpisodePerWorkerSampler
+        return super().__new__(cls)
+
     def __init__(self, *samplers: Sampler, episodes_per_worker: int = 1) -> None:
         if not samplers:
             raise ValueError("PerWorkerSampler needs one sampler per worker, got none")
         if len({id(sampler) for sampler in samplers}) != len(samplers):
             raise ValueError("PerWorkerSampler needs a separate sampler instance for each worker")
-        if episodes_per_worker < 1:
-            raise ValueError(f"episodes_per_worker must be a positive integer, got {episodes_per_worker}")
         self.samplers = samplers
-        self.episodes_per_worker = episodes_per_worker
+        self.layout = WorkerLayout(len(samplers), episodes_per_worker)
         self._rng_private: torch.Generator | None = None
         self._views: list[WorkerRows] = []
 
     @property
     def workers(self) -> int:
-        return len(self.samplers)
+        return self.layout.workers
+
+    @property
+    def episodes_per_worker(self) -> int:
+        return self.layout.episodes_per_worker
 
     # One generator drives every worker's draws, in worker order, as SamplerEnsemble shares its own.
     @property
@@ -220,7 +319,7 @@ class PerWorkerSampler(Sampler):
                 raise ValueError(
                     f"PerWorkerSampler needs an episode storage with ndim=2, got ndim={getattr(storage, 'ndim', 1)}"
                 )
-            views = [WorkerRows(storage, worker, self.workers, self.episodes_per_worker) for worker in range(self.workers)]
+            views = [WorkerRows(storage, worker, self.layout) for worker in range(self.workers)]
             for view, sampler in zip(views, self.samplers):
                 # A sampler sized by capacity (PER's trees) must cover its worker's rows.
                 capacity = getattr(sampler, "max_size", None)
@@ -239,9 +338,7 @@ class PerWorkerSampler(Sampler):
         else:
             index = torch.as_tensor(index)
             rows = index[..., 0] if index.ndim > 1 else index
-        e = self.episodes_per_worker
-        workers = rows // e % self.workers
-        local_rows = rows // (e * self.workers) * e + rows % e
+        workers, local_rows = self.layout.worker_of(rows), self.layout.local_rows(rows)
         parts = []
         for worker in workers.unique().tolist():
             positions = (workers == worker).nonzero().squeeze(-1)
@@ -270,8 +367,31 @@ class PerWorkerSampler(Sampler):
                 "use it inside a replay buffer whose writer notifies it."
             )
         views = self.worker_views(storage)
+        self._check_lanes(index)
         for worker, _, local in self._by_worker(index):
             self.samplers[worker].mark_update(local, storage=views[worker])
+
+    def check_episodes(self, episodes: TensorDictBase) -> None:
+        """Refuses episodes a worker's sampler cannot score, or a count that does not deal out to the workers whole."""
+        if episodes.ndim == 2:
+            self._require_whole_cycles(episodes.shape[0])
+        for sampler in self.samplers:
+            check = getattr(sampler, "check_episodes", None)
+            if check is not None:
+                check(episodes)
+
+    def _check_lanes(self, index: Any) -> None:
+        """The episode count of :meth:`check_episodes`, for a storage that runs no check before a write."""
+        rows = torch.as_tensor(index)
+        self._require_whole_cycles((rows[..., 0] if rows.ndim > 1 else rows).unique().numel())
+
+    def _require_whole_cycles(self, n_episodes: int) -> None:
+        if n_episodes % self.layout.cycle:
+            raise ValueError(
+                f"PerWorkerSampler deals the episodes of each write to {self.workers} workers, "
+                f"{self.episodes_per_worker} each in turn: write a multiple of {self.layout.cycle} episodes at a time "
+                f"(one per env), got {n_episodes}; other counts would mix the envs' lanes across workers"
+            )
 
     def update_priority(
         self, index: torch.Tensor, priority: float | torch.Tensor, *, storage: Storage | None = None
@@ -306,38 +426,8 @@ class PerWorkerSampler(Sampler):
         info = {"priority_weight": torch.cat(weights)} if weights else {}
         # Every worker's local rows to storage rows in one go.
         worker = torch.arange(self.workers).repeat_interleave(batch_size // self.workers)
-        global_rows = storage_rows(torch.cat(rows), worker, self.workers, self.episodes_per_worker)
+        global_rows = self.layout.global_rows(torch.cat(rows), worker)
         return (global_rows, torch.cat(steps)), info
-
-    # ---- what the trainer reads ---------------------------------------------------
-    @property
-    def n_episodes(self) -> int:
-        """Episodes stored across the workers."""
-        return sum(sampler.n_episodes for sampler in self.samplers)
-
-    def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
-        """Probability that one draw of the whole batch takes each of ``rows`` (each worker fills ``1/W`` of it)."""
-        probabilities = torch.empty(rows.shape, dtype=torch.float64)
-        for worker, positions, local in self._by_worker(rows):
-            probabilities[positions] = self.samplers[worker].probabilities(local).double() / self.workers
-        return probabilities
-
-    def refit(self, storage: Storage) -> None:
-        """Each worker's once-an-epoch re-ranking over its own episodes (MEP's density model)."""
-        for view, sampler in zip(self.worker_views(storage), self.samplers):
-            refit = getattr(sampler, "refit", None)
-            if refit is not None:
-                refit(view)
-
-    @property
-    def beta(self) -> float:
-        """The workers' importance-sampling exponent (PER's), one value for all, so one scheduler anneals it."""
-        return self.samplers[0].beta
-
-    @beta.setter
-    def beta(self, value: float) -> None:
-        for sampler in self.samplers:
-            sampler.beta = value
 
     # ---- state --------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
@@ -383,12 +473,89 @@ class PerWorkerSampler(Sampler):
                 f"sampler={self.samplers[0]!r})")
 
 
-def worker_sampler(sampler: Sampler) -> Sampler:
-    """The sampler of one worker: ``sampler`` itself unless it is a :class:`PerWorkerSampler` (then its first worker's).
+class EpisodePerWorkerSampler(PerWorkerSampler):
+    """A :class:`PerWorkerSampler` of episode samplers (:class:`EpisodeSampler`), which it becomes by itself.
 
-    Example:
-        >>> from torchrl_cebp.samplers import PERSampler
-        >>> worker_sampler(PerWorkerSampler(PERSampler(100), PERSampler(100)))
-        PERSampler(alpha=0.6, beta=0.400 -> 1.0 over 100000 draws)
+    An :class:`EpisodeSampler` over the whole storage: its episode count, draw probabilities and refit
+    are the workers' together.
+
+    Examples:
+        >>> from torchrl_cebp.replay.samplers import UniformEpisodeSampler
+        >>> sampler = PerWorkerSampler(UniformEpisodeSampler(), UniformEpisodeSampler())
+        >>> isinstance(sampler, EpisodeSampler), sampler.n_episodes
+        (True, 0)
     """
-    return sampler.samplers[0] if isinstance(sampler, PerWorkerSampler) else sampler
+
+    @property
+    def n_episodes(self) -> int:
+        """Episodes stored across the workers."""
+        return sum(sampler.n_episodes for sampler in self.samplers)
+
+    def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
+        """Probability that one draw of the whole batch takes each of ``rows`` (each worker fills ``1/W`` of it)."""
+        probabilities = torch.empty(rows.shape, dtype=torch.float64)
+        for worker, positions, local in self._by_worker(rows):
+            probabilities[positions] = self.samplers[worker].probabilities(local).double() / self.workers
+        return probabilities
+
+    def refit(self, storage: Storage) -> None:
+        """Each worker's once-an-epoch re-ranking over its own episodes (MEP's density model)."""
+        for view, sampler in zip(self.worker_views(storage), self.samplers):
+            sampler.refit(view)
+
+
+class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
+    """A :class:`PerWorkerSampler` of :class:`~torchrl.data.PrioritizedSampler` s (PER), which it becomes by itself.
+
+    A PrioritizedSampler to TorchRL, so that ``rb.update_tensordict_priority(batch)`` feeds the batch's
+    priorities to :meth:`PerWorkerSampler.update_priority`, which routes each row to its worker's PER.
+    Everything else is :class:`PerWorkerSampler`'s; none of PrioritizedSampler's own state is built.
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl.data import TensorDictReplayBuffer
+        >>> from torchrl_cebp.replay import EpisodeStorage
+        >>> from torchrl_cebp.replay.samplers import PERSampler
+        >>> sampler = PerWorkerSampler(PERSampler(4 * 50), PERSampler(4 * 50))
+        >>> type(sampler).__name__
+        'PrioritizedPerWorkerSampler'
+        >>> rb = TensorDictReplayBuffer(storage=EpisodeStorage(8 * 50), sampler=sampler, batch_size=4,
+        ...                             dim_extend=0, priority_key="td_error")
+        >>> _ = rb.extend(TensorDict({"observation": torch.randn(2, 50, 25)}, [2, 50]))
+        >>> batch = rb.sample()
+        >>> _ = batch.set("td_error", torch.full((4,), 1e3))
+        >>> rb.update_tensordict_priority(batch)
+        >>> [float(shard["max_priority"]) for shard in sampler.state_dict()["shards"]]  # the error fed back
+        [1000.0, 1000.0]
+    """
+
+    @property
+    def default_priority(self) -> float:
+        """The priority TorchRL gives a batch without priorities: the workers' (one value for all)."""
+        return self.samplers[0].default_priority
+
+    @property
+    def reduction(self) -> str:
+        """How TorchRL reduces a transition's several priorities to one: the workers' (one rule for all)."""
+        return self.samplers[0].reduction
+
+    @property
+    def beta(self) -> float:
+        """The workers' importance-sampling exponent, one value for all, so that one scheduler anneals it."""
+        return self.samplers[0].beta
+
+    @beta.setter
+    def beta(self, value: float) -> None:
+        for sampler in self.samplers:
+            sampler.beta = value
+
+    def beta_scheduler(self) -> LinearScheduler:
+        """One linear schedule of every worker's beta, from ``beta`` to the workers' ``beta_end`` over their
+        ``beta_anneal_draws`` draws (:class:`~torchrl_cebp.replay.samplers.PERSampler`'s)."""
+        first = self.samplers[0]
+        if not hasattr(first, "beta_end"):
+            raise TypeError(f"the workers' {type(first).__name__} has no beta schedule: PERSampler has one")
+        return LinearScheduler(self, "beta", final_value=first.beta_end, num_steps=first.beta_anneal_draws)
+
+    __getstate__ = Sampler.__getstate__  # PrioritizedSampler's refuses every copy; the workers' PERs say why

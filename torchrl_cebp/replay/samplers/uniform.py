@@ -20,7 +20,7 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-        >>> from torchrl_cebp.samplers import UniformEpisodeSampler
+        >>> from torchrl_cebp.replay.samplers import UniformEpisodeSampler
         >>> episodes = TensorDict({"observation": torch.randn(3, 50, 25)}, [3, 50])
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
         ...                             sampler=UniformEpisodeSampler(), batch_size=4, dim_extend=0)

@@ -1,0 +1,139 @@
+"""What a user's pipeline could get wrong without a word: each is now read right or refused with the fix."""
+import copy
+import pickle
+from pathlib import Path
+
+import pytest
+import torch
+from tensordict import TensorDict
+from torchrl.data import RandomSampler, TensorDictReplayBuffer
+
+from tests.modules import load_module
+from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
+from torchrl_cebp import _upstream
+from torchrl_cebp.envs import make_env
+from torchrl_cebp.replay import EpisodeMemmapStorage, EpisodeStorage, EpisodeWriter, HindsightRelabel, make_replay_buffer
+from torchrl_cebp.replay.samplers import (
+    CEBPSampler,
+    CPERSampler,
+    EBPSampler,
+    InitialCEBPSampler,
+    MEPSampler,
+    PERSampler,
+    ReleasedCEBPSampler,
+)
+
+
+def storages(tmp_path):
+    return {"tensor": EpisodeStorage(40 * T), "memmap": EpisodeMemmapStorage(40 * T, scratch_dir=str(tmp_path))}
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+@pytest.mark.parametrize("kind", ["tensor", "memmap"])
+def test_a_copied_buffer_draws_what_it_stores(how, kind, tmp_path):
+    rb = TensorDictReplayBuffer(storage=storages(tmp_path)[kind], sampler=RandomSampler(), dim_extend=0,
+                                batch_size=4096)
+    rb.extend(make_episodes(8))
+    copied = copy.deepcopy(rb) if how == "deepcopy" else pickle.loads(pickle.dumps(rb))
+    copied.extend(make_episodes(8, seed=1))
+    batch = copied.sample()
+    rows, steps = batch["index"].unbind(-1)
+    stored = copied.storage.get(rows)  # the whole rows, read apart from the (rows, steps) read of a draw
+    assert torch.equal(batch["observation"], stored["observation"][torch.arange(4096), steps])
+    assert torch.equal(copied.storage.get(torch.arange(8, 16))["observation"], make_episodes(8, seed=1)["observation"])
+
+
+def test_an_unnamed_batch_laid_out_time_first_is_refused_with_the_fix():
+    rollout = make_env("push", seed=0, num_envs=3).rollout(T)  # [3, T], time last
+    unnamed = rollout.transpose(0, 1).clone()  # [T, 3], no names
+    unnamed.names = [None, None]
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(40 * T), writer=EpisodeWriter(T), dim_extend=0, batch_size=8)
+    with pytest.raises(ValueError, match=r"\[50, 3\] do not follow each other along its last dimension.*transpose"):
+        rb.extend(unnamed)
+    assert len(rb) == 0
+    time_last = rollout.clone()
+    time_last.names = [None, None]
+    rb.extend(time_last)  # the same frames time last, unnamed: read as they are
+    assert rb.storage.shape == (3, T)
+
+
+def test_a_batch_the_user_laid_out_time_first_is_not_blamed_on_dim_extend():
+    rollout = make_env("push", seed=0, num_envs=3).rollout(T).transpose(0, 1)  # names ["time", None]
+    for writer in (None, EpisodeWriter(T)):
+        rb = TensorDictReplayBuffer(storage=EpisodeStorage(40 * T), writer=writer, dim_extend=0, batch_size=8)
+        with pytest.raises(ValueError, match=r"'time' dimension at 0.*laid out with time first.*transpose") as error:
+            rb.extend(rollout.clone())
+        assert "dim_extend" not in str(error.value)
+
+
+def test_a_write_lacking_a_stored_entry_is_refused_and_stores_nothing():
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=10 * T)
+    rb.extend(make_episodes(2))
+    partial = make_episodes(2, seed=1)
+    del partial["next", "touch"]
+    with pytest.raises(KeyError, match=r"must hold every stored entry: it lacks .*next.*touch"):
+        rb.extend(partial)
+    assert len(rb) == 2 * T
+
+
+@pytest.mark.parametrize("writer", [None, EpisodeWriter(T)])
+def test_a_first_write_its_sampler_cannot_score_stores_nothing(writer):
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=10 * T, writer=writer)
+    partial = make_episodes(2)
+    del partial["next", "touch"]
+    with pytest.raises(KeyError, match=r"no key .*next.*touch.*\[n_episodes, T, 2\]"):
+        rb.extend(partial)
+    assert len(rb) == 0 and rb.write_count == 0  # the writer's cursor moved back too
+    rb.extend(make_episodes(2, seed=1))  # the next write goes where the refused one would have
+    assert rb.storage.shape == (2, T) and rb.sampler.n_episodes == 2
+    assert set(rb.sample(4096)["index"][:, 0].tolist()) == {0, 1}
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: CEBPSampler(beta=-1), r"CEBPSampler beta=-1.0: allowed values lie in \[0.0, inf\)"),
+    (lambda: CEBPSampler(temperature=0), r"CEBPSampler temperature=0.0: allowed values lie in \(0.0, inf\)"),
+    (lambda: CEBPSampler(scale=float("nan")), r"CEBPSampler scale=nan"),
+    (lambda: InitialCEBPSampler(beta=-0.7), r"InitialCEBPSampler beta=-0.7"),
+    (lambda: ReleasedCEBPSampler(k=0, workspace=PUSH_WORKSPACE), r"ReleasedCEBPSampler k=0.0"),
+    (lambda: CPERSampler(lam=0), r"CPERSampler lam=0.0"),
+    (lambda: CPERSampler(threshold=-1), r"CPERSampler threshold=-1.0"),
+    (lambda: EBPSampler(clip_energy=0), r"EBPSampler clip_energy=0.0"),
+    (lambda: EBPSampler(temperature=-1), r"EBPSampler temperature=-1.0"),
+    (lambda: MEPSampler(n_components=0), r"MEPSampler n_components=0.0: allowed values lie in \[1, inf\)"),
+    (lambda: MEPSampler(reg_covar=0), r"MEPSampler reg_covar=0.0"),
+    (lambda: PERSampler(100, beta=-1), r"PERSampler beta=-1.0"),
+    (lambda: PERSampler(100, alpha=-0.6), r"PERSampler alpha=-0.6"),
+    (lambda: PERSampler(100, beta_anneal_draws=0), r"PERSampler beta_anneal_draws=0.0"),
+    (lambda: PERSampler(0), r"PERSampler capacity=0.0"),
+])
+def test_a_sampler_parameter_out_of_range_is_refused_naming_value_and_range(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_is_success_is_relabelled_with_the_reward():
+    episodes = make_episodes(8)
+    episodes["next", "is_success"] = episodes["next", "reward"] == 0  # the stored goal's success
+    rb = make_replay_buffer(None, HindsightRelabel(sparse_reward, future_p=1.0), capacity=10 * T, batch_size=4096)
+    rb.extend(episodes)
+    batch = rb.sample()
+    assert batch["next", "is_success"].any()  # relabelled goals are reached, the stored ones (random) almost never
+    assert torch.equal(batch["next", "is_success"], batch["next", "reward"] == 0)
+
+
+def test_the_episode_storage_finds_its_buffers_and_rewinds_their_writers():
+    storage = EpisodeStorage(10 * T)
+    rb = TensorDictReplayBuffer(storage=storage, dim_extend=0)
+    assert _upstream.attached_buffers(storage) == [rb]
+    rb.extend(make_episodes(3))
+    _upstream.rewind_writers(storage, torch.tensor([1, 2]))
+    assert rb.write_count == 1
+    rb.extend(make_episodes(1, seed=1))  # goes to row 1
+    assert torch.equal(storage.get(torch.tensor([1]))["observation"], make_episodes(1, seed=1)["observation"])
+
+
+def test_ddpg_her_refuses_no_frames_with_a_message(capsys):
+    example = load_module(Path(__file__).resolve().parents[2] / "examples" / "ddpg_her.py")
+    with pytest.raises(SystemExit) as done:
+        example.main(["--total-frames", "0"])
+    assert done.value.code == 2 and "--total-frames=0: must be a positive integer" in capsys.readouterr().err
