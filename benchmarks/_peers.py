@@ -1,7 +1,7 @@
 """Synthetic Fetch-like episodes and the peer replay buffers that ``sampling.py`` times ours against.
 
 Peers: TorchRL 0.14's ``HERReplayBuffer``, Stable-Baselines3's ``HerReplayBuffer`` and a numpy
-re-expression of the released CEBP sampler (erdiphd/HER_force, see shared/reference/ORIGINAL_CODE.md §1).
+re-expression of the released CEBP sampler (erdiphd/HER_force, the authors' released code).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Issue 14's before/after: draws of the removed fork (commit 3ca970a) against this checkout's stock buffer.
+"""Before and after the replay rework: draws of the removed fork (commit 3ca970a) against this
+checkout's stock buffer.
 
 Both packages load into one process (the old one renamed ``torchrl_cebp_old``) and draw in
 alternation, so that load drift on a shared machine hits both alike. Each line gives the median

@@ -3,9 +3,10 @@
 The same schedule for every method: ``cycles`` x (``2 x workers`` episodes of 50 steps, then 40
 updates of ``256 x workers``), then ``10 x workers`` deterministic test episodes; 3 x 256 networks.
 The methods run one after another, each with the torch threads given as ``NAME:THREADS``; by
-default the peers get one thread (ANCHORS.md's setting) and two, and our trainer with
-``overlap_collection=true`` gets two, which it shares with its env process (a TorchRL collector) for the simulation:
-one while the env process collects, both once it is done.
+default the peers get one thread (torch's default threads contend on a busy 2-core machine) and
+two, and our trainer with ``overlap_collection=true`` gets two, which it shares with its env
+process (a TorchRL collector) for the simulation: one while the env process collects, both once it
+is done.
 
   * ours: ``torchrl_cebp.training.train`` (touch-sensing FetchPush, standard goals), overlap off and on,
     and overlapped with ``precision=bf16`` (bfloat16 matrix products in the updates); with ``--workers`` > 1
@@ -34,7 +35,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 
-import tensordict  # noqa: F401, I001  (before mujoco: see shared/reference/ECOSYSTEM.md)
+import tensordict  # noqa: F401, I001  (before mujoco: tensordict's triton import crashes once OSMesa is loaded)
 import gymnasium as gym
 import gymnasium_robotics
 import numpy as np
