@@ -1,6 +1,6 @@
 """Train DDPG + HER with a replay sampler on a touch-sensing Fetch task.
 
-    python train.py preset=quick                      # a couple of minutes on 2 CPU cores
+    python train.py preset=quick                      # about 20 seconds on 2 CPU cores
     python train.py sampler=cebp env=pick_place
     python train.py -m sampler=her,cebp seed=0,1      # sweep, two jobs at a time
     python train.py sampler=cebp env=pick_place resume=true   # continue after the last finished epoch
