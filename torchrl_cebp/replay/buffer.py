@@ -38,6 +38,35 @@ def episode_storage(
     raise ValueError(f"unknown storage kind {kind!r}; valid kinds: ['memmap', 'tensor']")
 
 
+class EpisodeReplayBuffer(TensorDictReplayBuffer):
+    """A :class:`~torchrl.data.TensorDictReplayBuffer` whose draws read one version of each drawn episode.
+
+    Another process may overwrite a shared episode storage's rows while this one draws. A draw during
+    which a write ran (the storage's ``write_counts``) is drawn again: the priority, the valid length and
+    the data of each drawn transition then come from the same write, and no padding step is returned
+    (a plain :class:`~torchrl.data.TensorDictReplayBuffer` over the storage does not draw again).
+
+    Examples:
+        >>> import torch
+        >>> from tensordict import TensorDict
+        >>> from torchrl_cebp.replay import EpisodeStorage
+        >>> rb = EpisodeReplayBuffer(storage=EpisodeStorage(4 * 50), dim_extend=0, batch_size=8)
+        >>> _ = rb.extend(TensorDict({"observation": torch.randn(2, 50, 25)}, [2, 50]))
+        >>> rb.sample()["observation"].shape
+        torch.Size([8, 25])
+    """
+
+    def _sample(self, batch_size: int) -> tuple[TensorDictBase, dict]:
+        while True:
+            counts = getattr(self._storage, "write_counts", None)
+            if counts is None:
+                return super()._sample(batch_size)
+            writes = int(counts[-1])
+            data, info = super()._sample(batch_size)
+            if writes % 2 == 0 and int(counts[-1]) == writes:
+                return data, info
+
+
 def make_replay_buffer(
     sampler: Sampler | None,
     her: HindsightRelabel,
@@ -53,8 +82,8 @@ def make_replay_buffer(
     prefetch: int | None = None,
     pin_memory: bool = False,
     shared: bool = False,
-) -> TensorDictReplayBuffer:
-    """A stock :class:`~torchrl.data.TensorDictReplayBuffer` over an episode storage, a sampler (uniform HER by default) and HER.
+) -> EpisodeReplayBuffer:
+    """An :class:`EpisodeReplayBuffer` over an episode storage, a sampler (uniform HER by default) and HER.
 
     ``rb.extend(episodes)`` takes a tensordict of shape ``[n_episodes, T]`` (any collector batch
     with ``writer=EpisodeWriter(T)``);
@@ -89,7 +118,7 @@ def make_replay_buffer(
         raise ValueError(
             f"PERSampler capacity ({sampler.max_size}) must equal the buffer capacity ({capacity})"
         )
-    return TensorDictReplayBuffer(
+    return EpisodeReplayBuffer(
         storage=episode_storage(capacity, kind=storage, scratch_dir=scratch_dir, device=device),
         sampler=sampler,
         sample_unit=her,

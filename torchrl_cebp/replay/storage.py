@@ -34,81 +34,29 @@ def episode_rows(capacity: int, episode_steps: int) -> int:
     return -(capacity // -episode_steps)
 
 
-class RowWrites:
-    """How many times each row of an episode storage was written, in memory every process holding the storage shares.
-
-    Sent to another process with the storage (a spawned process, a collector's ``replay_buffer=``),
-    the counts are shared memory (as torch shares every CPU tensor it sends): a process that keeps
-    something computed from the rows (a sampler's priorities, the storage's own episode lengths)
-    holds a :meth:`watch` and learns from it which rows another process wrote.
-
-    Examples:
-        >>> writes = RowWrites(4)
-        >>> watch = writes.watch()
-        >>> writes.record(torch.tensor([1, 2]))
-        >>> watch.new_rows().tolist(), watch.new_rows().tolist()
-        ([1, 2], [])
-    """
-
-    def __init__(self, n_rows: int) -> None:
-        self.per_row = torch.zeros(n_rows, dtype=torch.long)
-        self.total = torch.zeros((), dtype=torch.long)
-
-    def record(self, rows: torch.Tensor) -> None:
-        """Counts a write of ``rows``, after their data is in place (a reader that sees the count sees the data)."""
-        self.per_row.index_add_(0, rows, torch.ones_like(rows))
-        self.total += 1
-
-    def watch(self) -> RowWriteWatch:
-        """A reader's view of the counts, seeing every write until now."""
-        return RowWriteWatch(self)
-
-
-class RowWriteWatch:
-    """What one process has seen of a :class:`RowWrites`: :meth:`new_rows` are those written since.
-
-    Costs one read of a shared number when nothing was written, O(rows) when something was.
-    """
-
-    def __init__(self, writes: RowWrites) -> None:
-        self.writes = writes
-        self._seen = writes.per_row.clone()
-        self._seen_total = int(writes.total)
-
-    def saw(self, rows: torch.Tensor) -> None:
-        """Marks the writes of ``rows`` as seen: the watching process wrote them itself."""
-        self._seen[rows] = self.writes.per_row[rows]
-
-    def new_rows(self) -> torch.Tensor:
-        """The rows written since the last call (or :meth:`saw`) that this process has not seen."""
-        total = int(self.writes.total)
-        if total == self._seen_total:
-            return torch.zeros(0, dtype=torch.long)
-        now = self.writes.per_row.clone()
-        rows = (now != self._seen).nonzero().squeeze(-1)
-        self._seen, self._seen_total = now, total
-        return rows
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        # Torch sends the seen counts as shared memory too; each process keeps its own.
-        self.__dict__.update(state, _seen=state["_seen"].clone())
-
-
 class _EpisodeRows:
     """Writes must be whole episodes of one fixed length (the storage's second dimension).
 
-    Each row's valid length (up to its first ``end_key`` flag) is kept on write, so that HER
-    reads it per draw instead of scanning the flags; rows another process wrote (:attr:`row_writes`)
-    are read at the next draw.
+    Each row's valid length (up to its first ``end_key`` flag) is kept on write, so that HER reads it per
+    draw instead of scanning the flags. The lengths and :attr:`write_counts` (each row's write count, then
+    a count of write starts and ends, odd while a write runs) are memory every process holding the storage
+    shares (torch shares every CPU tensor it sends to a spawned process). A reader that finds the last
+    count even and unchanged across its reads read one version of each row (writes themselves take turns:
+    TorchRL's cursor is one per buffer, or shared with ``shared=True``, which also locks them).
     """
 
     end_key: NestedKey = ("next", "done")
     _stored_keys: tuple[TensorDictBase, dict[tuple[str, ...], set[str]]] | None = None  # stored tensordict, its names
     _lengths: torch.Tensor | None = None  # per row; a row not written yet counts as whole
-    _short_rows = 0  # rows whose episode ends before the row does: while none, every row shares its length
-    _common_length: int | None = None
-    row_writes: RowWrites | None = None  # from the first write on
-    _lengths_watch: RowWriteWatch | None = None
+    _short_rows: torch.Tensor | None = None  # rows whose episode ends before the row does: while none, all share T
+    _write_counts: torch.Tensor | None = None  # [rows + 1], from the first write on
+
+    @property
+    def write_counts(self) -> torch.Tensor | None:
+        """Each row's write count, then the count of write starts and ends (odd while one runs); ``None`` while empty."""
+        if self.initialized:
+            self._read_lengths_if_unknown()
+        return self._write_counts
 
     def valid_lengths(self, rows: torch.Tensor) -> torch.Tensor:
         """Valid steps of the episodes stored in ``rows``."""
@@ -118,24 +66,20 @@ class _EpisodeRows:
     def common_length(self) -> int | None:
         """The valid length every row shares (the row length unless episodes end early), else ``None``."""
         self._read_lengths_if_unknown()
-        return self._common_length
+        # A full pass only while some episode ends early: the usual fixed-length episodes cost one read.
+        return self._steps if int(self._short_rows) == 0 else common_length(self._lengths)
 
     def _read_lengths_if_unknown(self) -> None:
-        if self._lengths is None:  # restored from a checkpoint: read them from the flags once
+        if self._lengths is None:  # first write, or restored from a checkpoint: read them from the flags once
             stored = _upstream.stored_tensordict(self)
             rows, row_length = stored.shape[:2]
-            if self.row_writes is None:  # restored without a write
-                self.row_writes = RowWrites(rows)
-            self._lengths_watch = self.row_writes.watch()
+            if self._write_counts is None:
+                self._write_counts = torch.zeros(rows + 1, dtype=torch.long)
             # Only the filled rows are read: the others were never written, so their memory is never touched.
             self._lengths = torch.full((rows,), row_length, dtype=torch.long)
-            self._short_rows = 0
+            self._short_rows = torch.zeros((), dtype=torch.long)
             filled = self.shape[0]
             self._set_lengths(torch.arange(filled), episode_lengths(stored[:filled], self.end_key))
-            return
-        rows = self._lengths_watch.new_rows()
-        if rows.numel():  # written by another process
-            self._set_lengths(rows, episode_lengths(self.get(rows), self.end_key))
 
     @property
     def _steps(self) -> int:
@@ -145,41 +89,38 @@ class _EpisodeRows:
     def _set_lengths(self, rows: torch.Tensor, lengths: torch.Tensor) -> None:
         row_length = self._steps
         now, before = lengths < row_length, self._lengths[rows] < row_length
-        self._short_rows += int(torch.count_nonzero(now) - torch.count_nonzero(before))
+        self._short_rows += torch.count_nonzero(now) - torch.count_nonzero(before)
         self._lengths[rows] = lengths
-        # A full pass only while some episode ends early: the usual fixed-length episodes cost a count per write.
-        self._common_length = row_length if self._short_rows == 0 else common_length(self._lengths)
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
-        if isinstance(data, TensorDictBase):  # every check before any row changes: a refused write stores nothing
-            try:
-                self._check_rows(data)
-                for buffer in _upstream.attached_buffers(self):
-                    check = getattr(buffer.sampler, "check_episodes", None)
-                    if check is not None:
-                        check(data)
-            except Exception:
-                if set_cursor and isinstance(cursor, torch.Tensor) and cursor.numel():
-                    _upstream.rewind_writers(self, cursor.reshape(-1))
-                raise
-        self._store(cursor, data, set_cursor)
-        if isinstance(data, TensorDictBase):
-            n_rows = self.max_size // self._steps
-            rows = cursor.reshape(-1) if isinstance(cursor, torch.Tensor) else torch.arange(n_rows)[cursor].reshape(-1)
-            if self.row_writes is None:
-                self.row_writes = RowWrites(n_rows)
-            self.row_writes.record(rows)
-            if self._lengths is None:  # first write, or first since a restore: every row from its flags
-                self._read_lengths_if_unknown()
-            else:
+        if not isinstance(data, TensorDictBase):
+            return self._store(cursor, data, set_cursor)
+        try:  # every check before any row changes: a refused write stores nothing
+            self._check_rows(data)
+            for buffer in _upstream.attached_buffers(self):
+                check = getattr(buffer.sampler, "check_episodes", None)
+                if check is not None:
+                    check(data)
+        except Exception:
+            if set_cursor and isinstance(cursor, torch.Tensor) and cursor.numel():
+                _upstream.rewind_writers(self, cursor.reshape(-1))
+            raise
+        known = self._lengths is not None
+        if known:
+            rows = cursor.reshape(-1) if isinstance(cursor, torch.Tensor) else (
+                torch.arange(self.max_size // self._steps)[cursor].reshape(-1))
+            self._write_counts[-1] += 1  # odd while the rows change
+        try:
+            self._store(cursor, data, set_cursor)
+            if known:
                 self._set_lengths(rows, episode_lengths(data, self.end_key))
-                self._lengths_watch.saw(rows)
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        # Torch sends the lengths as shared memory too; each process keeps its own, updated from the write counts.
-        if state.get("_lengths") is not None:
-            state = {**state, "_lengths": state["_lengths"].clone()}
-        super().__setstate__(state)
+        finally:
+            if known:
+                self._write_counts[rows.unique()] += 1
+                self._write_counts[-1] += 1
+        if not known:  # the first write: every filled row from its flags, each counted written
+            self._read_lengths_if_unknown()
+            self._count_written(slice(0, self.shape[0]))
 
     def _store(self, cursor: Any, data: Any, set_cursor: bool) -> None:
         """Writes ``data`` at ``cursor`` (the TorchRL storage's own write)."""
@@ -250,6 +191,7 @@ class _EpisodeRows:
                 _upstream.replace_stored_tensordict(self, TensorDict())
         super().load_state_dict(state_dict)
         self._lengths = None
+        self._count_written(slice(0, -1))
 
     def loads(self, path: Any) -> None:
         saved_shape = TensorDict.load_memmap(path).shape  # memory-mapped: reading the shape loads no data
@@ -257,6 +199,13 @@ class _EpisodeRows:
             self._adopt_saved_rows(saved_shape[0], saved_shape[1])
         super().loads(path)
         self._lengths = None
+        self._count_written(slice(0, -1))
+
+    def _count_written(self, rows: slice) -> None:
+        """Counts one write of ``rows`` (all of them, on a load: a sampler that meets the storage again scores it)."""
+        if self._write_counts is not None:
+            self._write_counts[rows] += 1
+            self._write_counts[-1] += 2
 
     def _adopt_saved_rows(self, rows: int, row_length: int) -> None:
         """Takes the saved storage's whole-row size, as its first write did (TorchRL's loads keep the unrounded

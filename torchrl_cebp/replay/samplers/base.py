@@ -11,10 +11,7 @@ end are padding, which priorities ignore and draws never return.
 from __future__ import annotations
 
 import abc
-import json
 import math
-import os
-from multiprocessing.context import get_spawning_popen
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -26,11 +23,38 @@ from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import episode_lengths, shared_length, stored_lengths, valid_steps
-from torchrl_cebp.replay.storage import RowWriteWatch
 
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
 # TorchRL's samplers' words for it, so that code catching theirs catches ours.
 EMPTY_STORAGE_ERROR = "Cannot sample from an empty storage."
+
+
+# What dumps() writes into its folder: the state_dict, which torch.load(weights_only=True) reads back.
+SAMPLER_STATE_FILE = "sampler_state.pt"
+
+
+def dump_state(sampler: Sampler, path: str | Path) -> None:
+    """The ``dumps`` of this package's samplers: ``sampler.state_dict()`` in the folder ``path``.
+
+    PER's is TorchRL's own format instead, which TorchRL's :class:`~torchrl.data.PrioritizedSampler` reads too.
+
+    Examples:
+        >>> import tempfile
+        >>> from torchrl_cebp.replay.samplers import UniformEpisodeSampler
+        >>> folder, restored = tempfile.mkdtemp(), UniformEpisodeSampler()
+        >>> dump_state(UniformEpisodeSampler(), folder)
+        >>> load_state(restored, folder)
+        >>> restored.n_episodes
+        0
+    """
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    torch.save(sampler.state_dict(), path / SAMPLER_STATE_FILE)
+
+
+def load_state(sampler: Sampler, path: str | Path) -> None:
+    """The ``loads`` of this package's samplers: what :func:`dump_state` wrote into ``path``."""
+    sampler.load_state_dict(torch.load(Path(path) / SAMPLER_STATE_FILE, weights_only=True))
 
 
 def require_key(
@@ -168,15 +192,13 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     :meth:`step_weights` (non-uniform steps) and :meth:`importance_weights`. Works with a stock
     :class:`~torchrl.data.TensorDictReplayBuffer` over
     ``LazyTensorStorage(capacity_in_transitions, ndim=2)``: the buffer's
-    writer notifies the sampler through :meth:`mark_update` after each write,
-    which is when the priority of each written episode is computed. A sampler
-    given a storage that already holds episodes scores them all when it first
-    meets it. Priorities live in the process that draws: sent with the buffer
-    to a spawned process (a collector's ``replay_buffer=``), the sampler leaves
-    the episodes written there to the drawing process, which scores them at its
-    next draw from the storage's shared row counts
-    (:class:`~torchrl_cebp.replay.storage.RowWrites`); a forked copy, or a storage
-    that keeps no such counts, refuses with the supported way.
+    writer notifies the sampler through :meth:`mark_update` after each write.
+    One path scores: the rows whose write count changed since the sampler last
+    looked, at each write it is told of and at each draw, whichever process wrote
+    them (an episode storage's shared ``write_counts``; over another storage the
+    sampler counts the writes it is told of, in memory a spawned copy shares).
+    A sampler given a storage that already holds episodes scores them all when it
+    first meets it.
 
     Args:
         end_key (NestedKey): the flag that ends an episode before its row does.
@@ -206,9 +228,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._cumulative_step_weights: torch.Tensor | None = None
         self._tree: SumSegmentTreeFp64 | None = None
         self._n_stored = 0
-        self._owner_pid = os.getpid()
-        self._spawned_copy = False  # sent to another process, where it leaves each write to the owner
-        self._writes_watch: RowWriteWatch | None = None
+        self._seen: torch.Tensor | None = None  # the storage's write counts as last scored (-1: to score)
+        self._writes: torch.Tensor | None = None  # the write counts of a storage that keeps none
 
     # ---- what subclasses define -------------------------------------------------
     @abc.abstractmethod
@@ -270,45 +291,48 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 f"{type(self).__name__} computes priorities from the written episodes and "
                 "needs the storage: use it inside a replay buffer whose writer notifies it."
             )
-        if os.getpid() != self._owner_pid:
-            if self._spawned_copy and getattr(storage, "row_writes", None) is not None:
-                return  # the storage counted the write in memory the owner shares: it scores the rows at its next draw
-            raise RuntimeError(
-                f"{type(self).__name__} keeps its priorities in process {self._owner_pid}, which draws, and cannot "
-                f"learn of the episodes process {os.getpid()} writes: a forked process, or a storage without shared "
-                "row counts, leaves it none. Send the buffer over an EpisodeStorage (or EpisodeMemmapStorage) to a "
-                "spawned process (torch.multiprocessing's 'spawn', a collector's replay_buffer=), or extend it in the "
-                "process that samples it, with the collector's batches (writer=EpisodeWriter(T) assembles their "
-                "episodes)."
-            )
-        watch = self._watch(storage)
-        # On first meeting a storage, the rows it held before count as written now.
-        rows = stored_rows(index) if self._tree is not None else torch.arange(storage.shape[0])
-        self._score_rows(rows, storage)
-        if watch is not None:
-            watch.saw(rows)
+        rows, counts = stored_rows(index), self._write_counts(storage)
+        if counts is self._writes:
+            counts[rows] += 1
+            counts[-1] += 2
+        elif self._seen is None and self._tree is not None:  # restored: the rows as they are, but those just written
+            self._seen = counts.clone()
+            self._seen[rows] = self._seen[-1] = -1
+        self._catch_up(storage, rows)
 
-    def _watch(self, storage: Storage) -> RowWriteWatch | None:
-        """This sampler's watch of the storage's row counts (``None`` for a storage without them)."""
-        writes = getattr(storage, "row_writes", None)
-        if writes is None:
-            return None
-        if self._writes_watch is None or self._writes_watch.writes is not writes:
-            self._writes_watch = writes.watch()
-        return self._writes_watch
+    def _write_counts(self, storage: Storage) -> torch.Tensor:
+        """Each row's write count, then of write starts and ends: the storage's, or this sampler's if it keeps none."""
+        counts = getattr(storage, "write_counts", None)
+        if counts is not None:
+            return counts
+        n_rows = storage.max_size // storage.shape[1]
+        if self._writes is None or self._writes.numel() != n_rows + 1:
+            self._writes = torch.zeros(n_rows + 1, dtype=torch.long)
+        return self._writes
 
-    def _catch_up(self, storage: Storage) -> None:
-        """Scores the rows no write told this sampler of: all the storage holds when it first meets it, then the
-        rows other processes write (O(rows) after such a write, one shared read when there was none)."""
-        watch = self._watch(storage)
-        if self._tree is None:
-            if len(storage):
-                self._score_rows(torch.arange(storage.shape[0]), storage)
+    def _catch_up(self, storage: Storage, written: torch.Tensor | None = None) -> None:
+        """Scores the rows whose write count changed since they were last scored: only the ``written`` rows when
+        theirs is the one write since, one read when there was none. While a write runs, or if one ran while
+        scoring, the rows are scored at the next look."""
+        if self._seen is None and not len(storage):
             return
-        if watch is not None:
-            rows = watch.new_rows()
-            if rows.numel():
-                self._score_rows(rows, storage)
+        counts = self._write_counts(storage)
+        if self._seen is None or self._seen.numel() != counts.numel():
+            self._seen = counts.clone()
+            if self._tree is None:  # first meeting: the rows it holds count as written now
+                self._seen[: storage.shape[0]] = self._seen[-1] = -1
+        writes = int(counts[-1])
+        if writes == int(self._seen[-1]) or writes % 2:
+            return
+        if written is not None and writes == int(self._seen[-1]) + 2:
+            changed = written
+        else:
+            changed = (counts[:-1] != self._seen[:-1]).nonzero().squeeze(-1)
+        now = counts.index_select(0, changed)
+        self._score_rows(changed, storage)
+        if int(self._write_counts(storage)[-1]) == writes:  # read again: a worker's counts are a copy
+            self._seen[changed] = now
+            self._seen[-1] = writes
 
     def _score_rows(self, rows: torch.Tensor, storage: Storage) -> None:
         if getattr(storage, "ndim", 1) != 2:
@@ -420,25 +444,13 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._tree = SumSegmentTreeFp64(self._priorities.numel())
         if self._priorities.numel():
             self._tree[torch.arange(self._priorities.numel())] = self._priorities
-        self._writes_watch = None  # the state matches the storage's rows as they are now
-
-    def _owner_only_state(self) -> dict[str, Any]:
-        """What a spawned copy holds in place of the per-row state only the drawing process keeps."""
-        return dict(_priorities=torch.zeros(0, dtype=torch.float64), _tree=None,
-                    _cumulative_step_weights=None, _n_stored=0,
-                    _writes_watch=None)
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = super().__getstate__()
-        if get_spawning_popen() is not None:  # sent to a new process, which writes and leaves the scoring to this one
-            # Without this process's priorities: torch would share them, and an rb.empty() there would clear them.
-            state.update(_spawned_copy=True, **self._owner_only_state())
-        return state
+        self._seen = None  # the state matches the storage's rows as they are now
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        if not state.get("_spawned_copy"):  # a copy (deepcopy, unpickled elsewhere) belongs to the process that made it
-            self._owner_pid = os.getpid()
+        # Torch sends every tensor as shared memory: each process scores into its own, and shares only the write
+        # counts it keeps for a storage that keeps none.
+        self.__dict__.update({name: value.clone() if isinstance(value, torch.Tensor) and name != "_writes" else value
+                              for name, value in state.items()})
 
     def _empty(self) -> None:
         self._priorities.zero_()
@@ -447,20 +459,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._cumulative_step_weights = None
         self._n_stored = 0
 
-    def dumps(self, path: str | Path) -> None:
-        path = Path(path)
-        path.mkdir(parents=True, exist_ok=True)
-        state = self.state_dict()
-        tensors = {k: v for k, v in state.items() if isinstance(v, torch.Tensor)}
-        torch.save(tensors, path / "sampler_tensors.pt")
-        others = {k: v for k, v in state.items() if not isinstance(v, torch.Tensor)}
-        (path / "sampler_metadata.json").write_text(json.dumps(others))
-
-    def loads(self, path: str | Path) -> None:
-        path = Path(path)
-        state = torch.load(path / "sampler_tensors.pt", weights_only=True)
-        state.update(json.loads((path / "sampler_metadata.json").read_text()))
-        self.load_state_dict(state)
+    dumps = dump_state
+    loads = load_state
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(n_episodes={self._n_stored})"

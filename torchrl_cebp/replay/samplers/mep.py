@@ -182,9 +182,6 @@ class MEPSampler(EpisodePrioritySampler):
                 setattr(self._mixture, name, state_dict[f"mixture_{name}"].numpy().copy())
             self._mixture.n_features_in_ = self._mixture.means_.shape[1]
 
-    def _owner_only_state(self) -> dict[str, Any]:
-        return {**super()._owner_only_state(), "_scores": torch.zeros(0, dtype=torch.float64)}
-
     def _empty(self) -> None:
         # An emptied buffer starts over: uniform draws until the next refit.
         super()._empty()

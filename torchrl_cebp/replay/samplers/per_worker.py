@@ -18,9 +18,7 @@ transforms, the ``[B, 2]`` index and the checkpoints exactly as they are.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import torch
@@ -32,8 +30,7 @@ from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import shared_length, stored_lengths
-from torchrl_cebp.replay.samplers.base import EpisodeSampler, split_index
-from torchrl_cebp.replay.storage import RowWrites, RowWriteWatch
+from torchrl_cebp.replay.samplers.base import EpisodeSampler, dump_state, load_state, split_index
 
 
 @dataclass(frozen=True)
@@ -194,39 +191,20 @@ class WorkerRows(Storage):
         raise NotImplementedError("WorkerRows answers no membership: ask the whole storage")
 
     @property
-    def row_writes(self) -> WorkerRowWrites | None:
-        """The storage's shared write counts of this worker's rows (``None`` if it keeps none), always the same
-        object: through it the worker's sampler learns of the rows another process wrote, as over a whole storage."""
-        writes = getattr(self.storage, "row_writes", None)
-        if writes is None:
+    def write_counts(self) -> torch.Tensor | None:
+        """The storage's write counts of this worker's rows, then of its write starts and ends (``None`` if none).
+
+        Gathered again only after a write: a draw that follows none costs one read."""
+        counts = getattr(self.storage, "write_counts", None)
+        if counts is None:
             return None
-        cached = self.__dict__.get("_row_writes")
-        if cached is None or cached.writes is not writes:
-            every_row = torch.arange(self.rows_within(self.storage.max_size // self.storage.shape[1]))
-            cached = self.__dict__["_row_writes"] = WorkerRowWrites(writes, self.global_rows(every_row))
+        source, writes, cached = self.__dict__.get("_counts", (None, None, None))
+        if source is not counts or int(counts[-1]) != writes:
+            writes = int(counts[-1])  # read first: a write after it renews the gathered rows at the next call
+            rows = self.global_rows(torch.arange(self.rows_within(counts.numel() - 1)))
+            cached = torch.cat([counts.index_select(0, rows), torch.tensor([writes])])
+            self.__dict__["_counts"] = counts, writes, cached
         return cached
-
-
-class WorkerRowWrites:
-    """A worker's rows of a storage's :class:`~torchrl_cebp.replay.storage.RowWrites`, read through (never copied).
-
-    What a :class:`~torchrl_cebp.replay.storage.RowWriteWatch` reads: ``per_row`` (in the worker's local rows)
-    and ``total``.
-    """
-
-    def __init__(self, writes: RowWrites, rows: torch.Tensor) -> None:
-        self.writes, self.rows = writes, rows
-
-    @property
-    def per_row(self) -> torch.Tensor:
-        return self.writes.per_row.index_select(0, self.rows)
-
-    @property
-    def total(self) -> torch.Tensor:
-        return self.writes.total
-
-    def watch(self) -> RowWriteWatch:
-        return RowWriteWatch(self)
 
 
 class PerWorkerSampler(Sampler):
@@ -453,20 +431,8 @@ class PerWorkerSampler(Sampler):
         for sampler in self.samplers:
             sampler._empty()
 
-    def dumps(self, path: str | Path) -> None:
-        path = Path(path)
-        path.mkdir(parents=True, exist_ok=True)
-        layout = {"workers": self.workers, "episodes_per_worker": self.episodes_per_worker}
-        (path / "per_worker.json").write_text(json.dumps(layout))
-        for worker, sampler in enumerate(self.samplers):
-            sampler.dumps(path / f"worker{worker}")
-
-    def loads(self, path: str | Path) -> None:
-        path = Path(path)
-        layout = json.loads((path / "per_worker.json").read_text())
-        self._check_layout(layout["workers"], layout["episodes_per_worker"])
-        for worker, sampler in enumerate(self.samplers):
-            sampler.loads(path / f"worker{worker}")
+    dumps = dump_state
+    loads = load_state
 
     def __repr__(self) -> str:
         return (f"PerWorkerSampler(workers={self.workers}, episodes_per_worker={self.episodes_per_worker}, "
