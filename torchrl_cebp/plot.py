@@ -49,6 +49,16 @@ from torchrl_cebp.training.metrics import CSV_NAME  # noqa: E402
 def read_curve(path: Path, metric: str) -> np.ndarray:
     """The ``metric`` column of one run's CSV, indexed by epoch.
 
+    Args:
+        path (Path): the run's ``progress.csv``.
+        metric (str): the column to read.
+
+    Returns:
+        the column's values, ordered by the ``epoch`` column.
+
+    Raises:
+        KeyError: the CSV has no column ``metric``.
+
     Examples:
         >>> import tempfile
         >>> with tempfile.TemporaryDirectory() as d:
@@ -70,7 +80,14 @@ def collect_sweep(root: Path, metric: str) -> dict[str, dict[str, list[np.ndarra
     In the trainer's layout ``<task>/<sampler>/<preset>/seed<k>`` the panel is the task folder, whether
     ``root`` holds several tasks or is one task's folder; runs laid out otherwise share one panel named
     after ``root``, labelled by their folders below it. Runs that do not log ``metric`` (e.g. IS weights,
-    under a sampler without them) are left out; a ``metric`` no run logs raises ``KeyError``.
+    under a sampler without them) are left out.
+
+    Args:
+        root (Path): the sweep folder, searched recursively.
+        metric (str): the CSV column to collect.
+
+    Raises:
+        KeyError: no run logs ``metric``.
     """
     groups: dict[str, dict[str, list[np.ndarray]]] = defaultdict(lambda: defaultdict(list))
     first_missing: KeyError | None = None
@@ -128,6 +145,9 @@ PANEL_PART_NAMES = {
 def sampler_name(sampler: str) -> str:
     """The method a sampler folder runs (:data:`SAMPLER_NAMES`); an unknown folder keeps its name.
 
+    Args:
+        sampler (str): the sampler folder, e.g. ``"cebp_initial"`` or ``"cebp_T0.01"``.
+
     Examples:
         >>> sampler_name("cebp_initial"), sampler_name("cebp_T0.01"), sampler_name("my_sampler")
         ('CEBP (Initial commit)', 'CEBP (paper form), T = 0.01', 'my_sampler')
@@ -147,6 +167,9 @@ def method_label(label: str) -> str:
     method as the comparison runs it (the paper preset, per-worker replay, baselines' critic loss, the sampler's
     published HER draw), and a superseded emulation (:data:`SUPERSEDED`) is marked so. Parts this mapping does not
     know are kept as they are, so that no run is mislabelled.
+
+    Args:
+        label (str): the configuration label, e.g. ``"cebp_initial/paper-per_worker"``.
 
     Examples:
         >>> method_label("her/paper"), method_label("cebp_initial/paper-per_worker")
@@ -174,7 +197,15 @@ def method_label(label: str) -> str:
 
 
 def method_order(label: str) -> tuple[int, str]:
-    """Sort key of configuration labels: the order of :data:`SAMPLER_NAMES` (HER first), then the folder."""
+    """Sort key of configuration labels: the order of :data:`SAMPLER_NAMES` (HER first), then the folder.
+
+    Args:
+        label (str): the configuration label ``<sampler>/<variant>``.
+
+    Examples:
+        >>> sorted(["mep/paper", "her/paper", "mine/paper"], key=method_order)
+        ['her/paper', 'mep/paper', 'mine/paper']
+    """
     samplers = list(SAMPLER_NAMES)
     sampler = sampler_of(label)
     return (samplers.index(sampler) if sampler in samplers else len(samplers), label)
@@ -182,6 +213,9 @@ def method_order(label: str) -> tuple[int, str]:
 
 def panel_title(panel: str) -> str:
     """A task folder ``<task>-<goal_space>[-<robot>][-T<steps>]...`` in words; parts it does not know stay as they are.
+
+    Args:
+        panel (str): the task folder; one whose task is unknown is returned as it is.
 
     Examples:
         >>> panel_title("push-extended-joint-tableblind")
@@ -200,7 +234,15 @@ def panel_title(panel: str) -> str:
 
 
 def padded(curves: list[np.ndarray]) -> np.ndarray:
-    """The seeds' curves as rows ``[seeds, epochs]``, NaN after the last epoch a seed reached."""
+    """The seeds' curves as rows ``[seeds, epochs]``, NaN after the last epoch a seed reached.
+
+    Args:
+        curves (list of np.ndarray): one curve per seed, of any lengths (at least one curve).
+
+    Examples:
+        >>> padded([np.array([0.1, 0.2]), np.array([0.3])]).tolist()
+        [[0.1, 0.2], [0.3, nan]]
+    """
     length = max(len(c) for c in curves)
     out = np.full((len(curves), length), np.nan)
     for i, curve in enumerate(curves):
@@ -210,6 +252,12 @@ def padded(curves: list[np.ndarray]) -> np.ndarray:
 
 def iqm_band(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per epoch, over the seeds that reached it: the IQM, its 95% bootstrap interval and the seed count.
+
+    Args:
+        curves (list of np.ndarray): one curve per seed, indexed by epoch.
+
+    Returns:
+        ``(iqm, low, high, seeds)``, each of shape ``[epochs]``.
 
     Examples:
         >>> mean, low, high, seeds = iqm_band([np.array([0.0, 1.0]), np.array([1.0])])
@@ -228,6 +276,9 @@ def iqm_band(curves: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 def seed_coverage(seeds_per_epoch: np.ndarray) -> str:
     """How many seeds each stretch of epochs (counted from 1) averages, for the legend.
+
+    Args:
+        seeds_per_epoch (np.ndarray): the seed count of each epoch, as :func:`iqm_band` returns it.
 
     Examples:
         >>> seed_coverage(np.array([3, 3, 3, 1]))
@@ -249,7 +300,15 @@ def seed_coverage(seeds_per_epoch: np.ndarray) -> str:
 
 
 def seed_count(n: int) -> str:
-    """``"1 seed"``, ``"3 seeds"``: the count every legend entry and table cell names."""
+    """``"1 seed"``, ``"3 seeds"``: the count every legend entry and table cell names.
+
+    Args:
+        n (int): the number of seeds.
+
+    Examples:
+        >>> seed_count(1), seed_count(3)
+        ('1 seed', '3 seeds')
+    """
     return f"{n} seed{'s' * (n > 1)}"
 
 
@@ -262,6 +321,9 @@ LEGEND_WIDTH = 55  # characters of a legend line, so that a legend stays as wide
 def sampler_of(label: str) -> str:
     """The sampler of a configuration label ``<sampler>/<variant>`` (or of a reference key ``<sampler>/<name>``).
 
+    Args:
+        label (str): the configuration label or reference key.
+
     Examples:
         >>> sampler_of("cebp_initial/paper-per_worker")
         'cebp_initial'
@@ -272,6 +334,9 @@ def sampler_of(label: str) -> str:
 def sampler_colours(samplers: Collection[str]) -> dict[str, str]:
     """One colour of matplotlib's cycle per sampler, fixed by :data:`SAMPLER_NAMES`' order (other samplers, sorted,
     after them), so that a method keeps its colour in every panel and every figure.
+
+    Args:
+        samplers (collection of str): the sampler folders to colour.
 
     Examples:
         >>> colours = sampler_colours({"her", "cebp"})
@@ -288,6 +353,9 @@ def variant_linestyles(labels: Collection[str]) -> dict[str, str]:
     ``VARIANT_LINESTYLES`` in turn, the method as the comparison runs it (its label the method's bare name) first,
     so that one sampler's curves differ in style where they share a colour (a fourth variant repeats the first's
     style). The dotted style is kept for tails that only some seeds reached.
+
+    Args:
+        labels (collection of str): the configuration labels of one panel.
 
     Examples:
         >>> variant_linestyles(["her/paper", "cebp_initial/paper-per_worker-wnorm", "cebp_initial/paper-per_worker"])
@@ -306,7 +374,14 @@ def select_configurations(
     groups: dict[str, dict[str, list]], patterns: Sequence[str] | None
 ) -> dict[str, dict[str, list]]:
     """``groups`` restricted to the configuration labels (``<sampler>/<variant>``) that match one of ``patterns``
-    (shell wildcards, e.g. ``her/*``); panels left without a configuration are dropped. ``None`` keeps all.
+    (shell wildcards, e.g. ``her/*``); panels left without a configuration are dropped.
+
+    Args:
+        groups (dict): ``{panel: {configuration label: curves}}``, as :func:`collect_sweep` returns it.
+        patterns (sequence of str or None): shell patterns of the labels to keep; ``None`` keeps all.
+
+    Raises:
+        KeyError: a pattern matches no configuration.
 
     Examples:
         >>> groups = {"push-standard": {"her/paper": [], "cebp/paper-wnorm": []}, "slide-standard": {"cebp/paper": []}}
@@ -332,7 +407,22 @@ def select_panels(
 ) -> dict[str, dict]:
     """``groups`` restricted to ``panels`` (task folders), in that order; all of them, sorted, for ``None``.
 
-    A panel of ``may_be_empty`` (one with published values to mark) is kept without runs, as ``{}``.
+    Args:
+        groups (dict): ``{panel: {configuration label: curves}}``, as :func:`collect_sweep` returns it.
+        panels (sequence of str or None): the task folders to keep, in order; ``None`` keeps all, sorted.
+        root (Path): the sweep folder, named by the error.
+        may_be_empty (collection of str, optional): panels kept without runs, as ``{}`` (those with published
+            values to mark). Defaults to none.
+
+    Raises:
+        KeyError: a panel of ``panels`` has no runs and is not in ``may_be_empty``.
+
+    Examples:
+        >>> groups = {"slide-standard": {"her/paper": []}, "push-standard": {"her/paper": []}}
+        >>> list(select_panels(groups, None, Path("runs")))
+        ['push-standard', 'slide-standard']
+        >>> select_panels(groups, ["pick_place-standard"], Path("runs"), may_be_empty={"pick_place-standard"})
+        {'pick_place-standard': {}}
     """
     if panels is None:
         return dict(sorted(groups.items()))
@@ -347,7 +437,12 @@ def read_reference(path: str | Path) -> dict[str, dict[str, list[tuple[int, floa
 
     ``panel`` is a task folder (e.g. ``push-standard``), ``sampler`` the sampler folder whose colour the
     markers take, ``name`` the legend's name for the published curve, ``epoch`` the epochs trained.
-    Returns ``{panel: {"<sampler>/<name>": [(epoch, value), ...]}}``.
+
+    Args:
+        path (str or Path): the CSV.
+
+    Returns:
+        ``{panel: {"<sampler>/<name>": [(epoch, value), ...]}}``.
 
     Example:
         >>> import tempfile, pathlib
@@ -366,6 +461,10 @@ def read_reference(path: str | Path) -> dict[str, dict[str, list[tuple[int, floa
 
 def caption(metric: str, reference_source: str | None) -> str:
     """What a figure's lines, bands, dotted tails and markers are, printed under it.
+
+    Args:
+        metric (str): the CSV column drawn.
+        reference_source (str or None): where the published values marked come from; ``None`` when none are.
 
     Examples:
         >>> print(caption("test_success", "the paper's Fig. 2"))
@@ -398,20 +497,47 @@ def draw_sweep(
     A sampler keeps its colour in every panel and figure, and a published curve takes its sampler's colour; a
     sampler's variants in one panel (e.g. ``paper-per_worker`` and ``paper-per_worker-wnorm``) differ by line style.
     A metric whose values all lie in [0, 1] (a success rate, a fraction) is drawn on one shared scale, so
-    that a task still near zero looks it.
-    ``title`` names the figure; with a single panel it replaces the panel's own title (its task in words,
-    :func:`panel_title`), which is what a sweep root without a ``<task>-<goal_space>`` level (e.g.
-    ``runs/learning``) needs.
-    ``log_y`` draws the metric on a log scale, for one that spans decades (IS weights, the effective
-    fraction of the buffer drawn from).
-    ``panels`` keeps those task folders only, in that order; ``configurations`` keeps the configuration labels that
-    match one of its shell patterns (:func:`select_configurations`). ``reference`` (see :func:`read_reference`)
-    adds published values as markers, in the colour of the sampler they belong to, from ``reference_source``; a
-    panel in ``panels`` with published values but no runs yet is drawn with the markers alone.
-    With ``configurations``, only the published curves of the samplers drawn are marked.
-    ``reference_panel`` marks every panel with that panel's published values (the paper's Push curves on each
-    robot's Push). The x axis ends at the panel's last epoch: published values past it are listed in the panel,
-    not drawn, so that they do not squeeze our curves.
+    that a task still near zero looks it. The x axis ends at the panel's last epoch: published values past it
+    are listed in the panel, not drawn, so that they do not squeeze our curves.
+
+    Args:
+        root (str or Path): the sweep folder (see :func:`collect_sweep`).
+        metric (str, optional): the CSV column drawn. Defaults to ``"test_success"``.
+        title (str, optional): names the figure; with a single panel it replaces the panel's own title (its task
+            in words, :func:`panel_title`), which is what a sweep root without a ``<task>-<goal_space>`` level
+            (e.g. ``runs/learning``) needs. Defaults to ``None``.
+        log_y (bool, optional): draws the metric on a log scale, for one that spans decades (IS weights, the
+            effective fraction of the buffer drawn from). Defaults to ``False``.
+        panels (sequence of str, optional): keeps those task folders only, in that order. Defaults to ``None``
+            (all, sorted).
+        reference (str or Path, optional): a CSV of published values (see :func:`read_reference`), marked in the
+            colour of the sampler they belong to; a panel in ``panels`` with published values but no runs yet is
+            drawn with the markers alone. Defaults to ``None``.
+        configurations (sequence of str, optional): keeps the configuration labels that match one of these shell
+            patterns (:func:`select_configurations`); only the published curves of the samplers drawn are then
+            marked. Defaults to ``None`` (all).
+        reference_panel (str, optional): marks every panel with that panel's published values (the paper's Push
+            curves on each robot's Push). Defaults to ``None``.
+        reference_source (str, optional): where the published values come from, for the caption. Defaults to
+            ``"the paper's Fig. 2"``.
+
+    Returns:
+        the figure.
+
+    Raises:
+        FileNotFoundError: no run under ``root`` logs ``metric`` (or matches ``configurations``).
+        KeyError: a panel or configuration asked for has no runs, or ``reference_panel`` no published values.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     run = Path(d) / "push-standard" / "her" / "paper" / "seed0"
+        ...     run.mkdir(parents=True)
+        ...     _ = (run / CSV_NAME).write_text("epoch,test_success\\n0,0.1\\n1,0.4\\n")
+        ...     fig = draw_sweep(d)
+        >>> [ax.get_title() for ax in fig.axes]
+        ['Push: standard goals']
+        >>> plt.close(fig)
     """
     root = Path(root)
     groups = select_configurations(collect_sweep(root, metric), configurations)
@@ -508,7 +634,32 @@ def plot_sweep(
     configurations: Sequence[str] | None = None,
     reference_panel: str | None = None,
 ) -> Path:
-    """Draws the sweep (:func:`draw_sweep`) to a PNG, by default ``<root>/<metric>.png``; returns its path."""
+    """Draws the sweep (:func:`draw_sweep`) to a PNG.
+
+    Args:
+        root (str or Path): the sweep folder.
+        out (str or Path, optional): the PNG's path. Defaults to ``<root>/<metric>.png``.
+        metric (str, optional): the CSV column drawn. Defaults to ``"test_success"``.
+        title (str, optional): see :func:`draw_sweep`. Defaults to ``None``.
+        log_y (bool, optional): see :func:`draw_sweep`. Defaults to ``False``.
+        panels (sequence of str, optional): see :func:`draw_sweep`. Defaults to ``None``.
+        reference (str or Path, optional): see :func:`draw_sweep`. Defaults to ``None``.
+        configurations (sequence of str, optional): see :func:`draw_sweep`. Defaults to ``None``.
+        reference_panel (str, optional): see :func:`draw_sweep`. Defaults to ``None``.
+
+    Returns:
+        the PNG's path.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     run = Path(d) / "push-standard" / "her" / "paper" / "seed0"
+        ...     run.mkdir(parents=True)
+        ...     _ = (run / CSV_NAME).write_text("epoch,test_success\\n0,0.1\\n1,0.4\\n")
+        ...     out = plot_sweep(d)
+        ...     out.name, out.stat().st_size > 0
+        ('test_success.png', True)
+    """
     fig = draw_sweep(root, metric, title, log_y, panels, reference, configurations, reference_panel)
     out = Path(out) if out is not None else Path(root) / f"{metric}.png"
     fig.savefig(out, dpi=120)
@@ -518,6 +669,10 @@ def plot_sweep(
 
 def iqm_cell(per_seed: list[float], seeds_in_total: int) -> str:
     """``IQM [95% CI]`` of the seeds' values, naming how many when not all seeds count.
+
+    Args:
+        per_seed (list of float): one value per seed that counts; none gives ``-``.
+        seeds_in_total (int): the configuration's seeds.
 
     Examples:
         >>> iqm_cell([0.1, 0.3], 3)
@@ -535,6 +690,10 @@ def iqm_cell(per_seed: list[float], seeds_in_total: int) -> str:
 def improvement_cell(per_seed: list[float], baseline: list[float]) -> str:
     """``P(X > baseline) [95% CI]`` over the seeds' values, or ``-`` when either side has none.
 
+    Args:
+        per_seed (list of float): one value per seed of the configuration.
+        baseline (list of float): one value per seed of the baseline.
+
     Examples:
         >>> improvement_cell([0.5, 0.6], [0.1, 0.2])
         '1.00 [1.00, 1.00]'
@@ -546,7 +705,15 @@ def improvement_cell(per_seed: list[float], baseline: list[float]) -> str:
 
 
 def epochs_phrase(n: int) -> str:
-    """``"after 1 epoch"``, ``"after 10 epochs"``: the epoch a table column reads."""
+    """``"after 1 epoch"``, ``"after 10 epochs"``: the epoch a table column reads.
+
+    Args:
+        n (int): the epochs trained.
+
+    Examples:
+        >>> epochs_phrase(1), epochs_phrase(10)
+        ('after 1 epoch', 'after 10 epochs')
+    """
     return f"after {n} epoch{'s' * (n > 1)}"
 
 
@@ -564,13 +731,25 @@ def summary_table(
     IQM [95% stratified-bootstrap CI] of ``metric`` after each of ``after_epochs`` epochs over the seeds that got
     there, and the runs' training hours (the sum of their ``epoch_s``). Every column head says what its cells are.
 
-    ``mean_over=(first, last)`` adds a column of each seed's mean over epochs ``first`` to ``last``
-    (counted from 1, both included; seeds that reached ``last``), steadier than one epoch's value
-    while success is still a few test episodes. ``improvement_at=n`` (or several) adds, per ``n``, the
-    probability that a configuration's run beats a run of the panel's ``baseline`` configuration (the
-    sampler folder of that name, e.g. ``her``; ``-`` in panels without it) after ``n`` epochs, with its
-    95% interval, over the seeds of either that reached epoch ``n``. ``panels`` keeps those task folders, and
-    ``configurations`` the configurations that match its shell patterns (:func:`select_configurations`).
+    Args:
+        root (str or Path): the sweep folder (see :func:`collect_sweep`).
+        after_epochs (list of int): the epoch counts (from 1) to give a column each.
+        metric (str, optional): the CSV column summarised. Defaults to ``"test_success"``.
+        mean_over (tuple of int, optional): ``(first, last)`` adds a column of each seed's mean over epochs
+            ``first`` to ``last`` (counted from 1, both included; seeds that reached ``last``), steadier than one
+            epoch's value while success is still a few test episodes. Defaults to ``None``.
+        improvement_at (int or sequence of int, optional): per ``n``, a column of the probability that a
+            configuration's run beats a run of the panel's ``baseline`` configuration after ``n`` epochs, with
+            its 95% interval, over the seeds of either that reached epoch ``n``. Defaults to none.
+        baseline (str, optional): the sampler folder compared with (``-`` in panels without it).
+            Defaults to ``"her"``.
+        panels (sequence of str, optional): keeps those task folders. Defaults to ``None`` (all, sorted).
+        configurations (sequence of str, optional): keeps the configurations that match these shell patterns
+            (:func:`select_configurations`). Defaults to ``None`` (all).
+
+    Raises:
+        ValueError: an epoch count below 1, or ``mean_over`` not ``1 <= first <= last``.
+        FileNotFoundError: no run under ``root`` logs ``metric`` (or matches ``configurations``).
 
     Examples:
         >>> import tempfile
@@ -644,9 +823,19 @@ def panel_tables(
 ) -> str:
     """One :func:`summary_table` per panel (task folder), under a heading of its own, each with those of
     ``after_epochs`` and ``improvement_at`` that some run of the panel reached, and ``mean_over`` where one
-    reached its last epoch: a task trained for 12 epochs gets no empty column for 20. ``panels`` keeps
-    those task folders, in that order (default: all, sorted), and ``configurations`` the configurations that match
-    its shell patterns.
+    reached its last epoch: a task trained for 12 epochs gets no empty column for 20.
+
+    Args:
+        root (str or Path): the sweep folder (see :func:`collect_sweep`).
+        after_epochs (list of int): as :func:`summary_table`'s.
+        metric (str, optional): the CSV column summarised. Defaults to ``"test_success"``.
+        mean_over (tuple of int, optional): as :func:`summary_table`'s. Defaults to ``None``.
+        improvement_at (sequence of int, optional): as :func:`summary_table`'s. Defaults to none.
+        baseline (str, optional): as :func:`summary_table`'s. Defaults to ``"her"``.
+        panels (sequence of str, optional): keeps those task folders, in that order. Defaults to ``None``
+            (all, sorted).
+        configurations (sequence of str, optional): keeps the configurations that match these shell patterns.
+            Defaults to ``None`` (all).
 
     Examples:
         >>> import tempfile
@@ -684,6 +873,24 @@ def panel_tables(
 
 
 def main(argv: list[str] | None = None) -> None:
+    """The command line: draws the sweep (:func:`plot_sweep`) and, with ``--table``, prints its tables.
+
+    Args:
+        argv (list of str, optional): the arguments (``--help`` lists them). Defaults to ``None``: the
+            process's own.
+
+    Examples:
+        >>> import contextlib, io, tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     run = Path(d) / "push-standard" / "her" / "paper" / "seed0"
+        ...     run.mkdir(parents=True)
+        ...     _ = (run / CSV_NAME).write_text("epoch,test_success,epoch_s\\n0,0.1,60\\n1,0.4,60\\n")
+        ...     printed = io.StringIO()
+        ...     with contextlib.redirect_stdout(printed):
+        ...         main([d, "--table", "2"])
+        ...     printed.getvalue().splitlines()[-1]
+        '| Push: standard goals | HER | her/paper | 1 | 0.40 [0.40, 0.40] | 0.0 |'
+    """
     parser = argparse.ArgumentParser(
         description="Success curves of a sweep (IQM over seeds, 95% stratified-bootstrap band), and tables."
     )

@@ -35,6 +35,14 @@ def _as_runs_by_tasks(scores) -> np.ndarray:
 def iqm(scores, axis: int | None = None) -> np.ndarray | float:
     """Interquartile mean: ``scipy.stats.trim_mean(scores, 0.25)`` over all runs and tasks (or along ``axis``).
 
+    Args:
+        scores (array_like): the scores, e.g. ``[runs, tasks]``.
+        axis (int, optional): the axis of the runs to trim and average; ``None`` pools every score.
+            Defaults to ``None``.
+
+    Returns:
+        a float when pooled (or for a 1-D ``scores``), else an array without ``axis``.
+
     Examples:
         >>> iqm([1.0, 2.0, 3.0, 4.0])  # drops 1 and 4
         2.5
@@ -74,8 +82,19 @@ def stratified_bootstrap_ci(
 ) -> tuple[float, float]:
     """Percentile interval of ``statistic`` over ``reps`` stratified bootstrap resamples of ``scores`` [runs, tasks].
 
-    ``statistic`` maps a batch ``[reps, runs, tasks]`` of resampled scores to ``[reps]`` values (the IQM
-    by default).
+    Args:
+        scores (array_like): ``[runs, tasks]``, or ``[runs]`` for one task.
+        statistic (callable, optional): maps a batch ``[reps, runs, tasks]`` of resampled scores to ``[reps]``
+            values. Defaults to the IQM of each resample.
+        reps (int, optional): the bootstrap resamples. Defaults to ``BOOTSTRAP_REPS`` (5000).
+        confidence (float, optional): the interval's coverage. Defaults to ``CONFIDENCE`` (0.95).
+        seed (int, optional): seeds the resampling. Defaults to ``0``.
+
+    Returns:
+        ``(low, high)``.
+
+    Raises:
+        ValueError: ``scores`` is not ``[runs]`` or ``[runs, tasks]`` with at least one run.
 
     Examples:
         >>> stratified_bootstrap_ci([0.5, 0.5, 0.5])
@@ -98,6 +117,13 @@ def _mann_whitney(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 def probability_of_improvement(x, y) -> float:
     """``P(X > Y)``: how likely a run of ``x`` scores above a run of ``y`` (ties count half), averaged over tasks.
 
+    Args:
+        x (array_like): ``[runs, tasks]``, or ``[runs]`` for one task.
+        y (array_like): the same for the other method; its run count may differ.
+
+    Raises:
+        ValueError: ``x`` and ``y`` score different numbers of tasks, or either has no run.
+
     Examples:
         >>> probability_of_improvement([1.0, 2.0], [0.0, 2.0])  # (1 + 0 + 1 + 0.5) / 4
         0.625
@@ -114,6 +140,16 @@ def probability_of_improvement_ci(
     x, y, reps: int = BOOTSTRAP_REPS, confidence: float = CONFIDENCE, seed: int = 0
 ) -> tuple[float, float]:
     """Stratified-bootstrap percentile interval of :func:`probability_of_improvement`, resampling both sets.
+
+    Args:
+        x (array_like): ``[runs, tasks]``, or ``[runs]`` for one task.
+        y (array_like): the same for the other method.
+        reps (int, optional): the bootstrap resamples. Defaults to ``BOOTSTRAP_REPS`` (5000).
+        confidence (float, optional): the interval's coverage. Defaults to ``CONFIDENCE`` (0.95).
+        seed (int, optional): seeds the resampling. Defaults to ``0``.
+
+    Returns:
+        ``(low, high)``.
 
     Examples:
         >>> probability_of_improvement_ci([1.0, 1.0], [0.0, 0.0])

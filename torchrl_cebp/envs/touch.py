@@ -110,6 +110,12 @@ class TouchReporting:
     after a step (the env's ``_mujoco_step`` calls :meth:`substep_touch`), the reading at the
     reset state after a reset.
 
+    The mixin takes no constructor arguments of its own: put it before the env class in the bases, and call
+    :meth:`locate_touch_sensors` once the model is compiled.
+
+    Attributes:
+        touch (np.ndarray): ``[left, right]``, the touch of the last step or reset.
+
     Example:
         >>> from torchrl_cebp.envs import make_touch_fetch
         >>> env = make_touch_fetch("pick_place")  # a TouchReporting env

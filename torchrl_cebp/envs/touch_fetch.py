@@ -218,7 +218,21 @@ class _TouchFetchMixin(TouchReporting):
 class TouchFetchPickAndPlaceEnv(_TouchFetchMixin, MujocoFetchPickAndPlaceEnv):
     """Fetch PickAndPlace with finger touch sensors.
 
-    Takes the keyword arguments of :func:`make_touch_fetch`.
+    :func:`make_touch_fetch` builds one by task name.
+
+    Args:
+        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
+        control (str, optional): ``"mocap"`` (gymnasium-robotics' Fetch) or ``"joint"`` (CPER's
+            joint-controlled Fetch). Defaults to ``"mocap"``.
+        touch_ignores_table (bool, optional): puts the pads on sensor bodies that never feel the table.
+            Defaults to ``False``.
+        touch_in_observation (bool, optional): appends the step's touch and its running episode sum to the
+            observation. Defaults to ``False``.
+        max_episode_steps (int, optional): the episode length. Defaults to ``None``: the goal space's.
+        **kwargs: forwarded to the gymnasium-robotics env (``render_mode``, ``width``, ``height``, ...).
+
+    Raises:
+        ValueError: an unknown goal space or control.
 
     Example:
         >>> env = TouchFetchPickAndPlaceEnv(goal_space="extended")
@@ -233,7 +247,21 @@ class TouchFetchPickAndPlaceEnv(_TouchFetchMixin, MujocoFetchPickAndPlaceEnv):
 class TouchFetchPushEnv(_TouchFetchMixin, MujocoFetchPushEnv):
     """Fetch Push (gripper blocked closed) with finger touch sensors.
 
-    Takes the keyword arguments of :func:`make_touch_fetch`.
+    :func:`make_touch_fetch` builds one by task name.
+
+    Args:
+        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
+        control (str, optional): ``"mocap"`` (gymnasium-robotics' Fetch) or ``"joint"`` (CPER's
+            joint-controlled Fetch). Defaults to ``"mocap"``.
+        touch_ignores_table (bool, optional): puts the pads on sensor bodies that never feel the table.
+            Defaults to ``False``.
+        touch_in_observation (bool, optional): appends the step's touch and its running episode sum to the
+            observation. Defaults to ``False``.
+        max_episode_steps (int, optional): the episode length. Defaults to ``None``: the goal space's.
+        **kwargs: forwarded to the gymnasium-robotics env (``render_mode``, ``width``, ``height``, ...).
+
+    Raises:
+        ValueError: an unknown goal space or control.
 
     Example:
         >>> env = TouchFetchPushEnv()
@@ -248,7 +276,21 @@ class TouchFetchPushEnv(_TouchFetchMixin, MujocoFetchPushEnv):
 class TouchFetchSlideEnv(_TouchFetchMixin, MujocoFetchSlideEnv):
     """Fetch Slide with finger touch sensors.
 
-    Takes the keyword arguments of :func:`make_touch_fetch`.
+    :func:`make_touch_fetch` builds one by task name.
+
+    Args:
+        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
+        control (str, optional): ``"mocap"`` (gymnasium-robotics' Fetch) or ``"joint"`` (CPER's
+            joint-controlled Fetch). Defaults to ``"mocap"``.
+        touch_ignores_table (bool, optional): puts the pads on sensor bodies that never feel the table.
+            Defaults to ``False``.
+        touch_in_observation (bool, optional): appends the step's touch and its running episode sum to the
+            observation. Defaults to ``False``.
+        max_episode_steps (int, optional): the episode length. Defaults to ``None``: the goal space's.
+        **kwargs: forwarded to the gymnasium-robotics env (``render_mode``, ``width``, ``height``, ...).
+
+    Raises:
+        ValueError: an unknown goal space or control.
 
     Example:
         >>> TouchFetchSlideEnv(goal_space="extended").max_episode_steps

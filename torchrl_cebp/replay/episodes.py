@@ -14,6 +14,9 @@ from torchrl_cebp import _upstream
 def next_key(key: NestedKey) -> tuple[str, ...]:
     """``("next", *key)``: where TorchRL keeps the next-state's entry of ``key``.
 
+    Args:
+        key (NestedKey): the entry's key.
+
     Examples:
         >>> next_key("achieved_goal")
         ('next', 'achieved_goal')
@@ -27,7 +30,13 @@ def episode_lengths(
     """Valid steps of each episode row: up to and including its first ``end_key`` flag, else the whole row.
 
     Steps after the first flag are padding: no sampler draws them and HER takes no goal from them.
-    ``rows`` restricts the answer to those rows of ``episodes`` (shape ``[len(rows)]``).
+
+    Args:
+        episodes (TensorDictBase): episode rows ``[n, T]``.
+        end_key (NestedKey, optional): the flag that ends an episode. Defaults to ``("next", "done")``; without
+            it every row is whole.
+        rows (torch.Tensor, optional): restricts the answer to those rows of ``episodes`` (shape
+            ``[len(rows)]``). Defaults to ``None`` (all rows).
 
     Examples:
         >>> from tensordict import TensorDict
@@ -48,6 +57,11 @@ def end_flags(
     episodes: TensorDictBase, end_key: NestedKey = ("next", "done"), rows: torch.Tensor | None = None
 ) -> torch.Tensor | None:
     """``[n, T]``: whether each step of the rows (of ``rows``, if given) ends an episode; ``None`` without ``end_key``.
+
+    Args:
+        episodes (TensorDictBase): episode rows ``[n, T]``.
+        end_key (NestedKey, optional): the flag that ends an episode. Defaults to ``("next", "done")``.
+        rows (torch.Tensor, optional): the rows to read. Defaults to ``None`` (all rows).
 
     Examples:
         >>> from tensordict import TensorDict
@@ -71,6 +85,11 @@ def stored_lengths(storage: Storage, rows: torch.Tensor, end_key: NestedKey = ("
     answers when it cuts episodes at the same ``end_key``; any other storage (TorchRL's ``LazyTensorStorage``)
     is read at the rows' flags.
 
+    Args:
+        storage (Storage): an ``ndim=2`` storage of episode rows.
+        rows (torch.Tensor): the rows to measure.
+        end_key (NestedKey, optional): the flag that ends an episode. Defaults to ``("next", "done")``.
+
     Examples:
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage
@@ -92,6 +111,11 @@ def shared_length(storage: Storage, end_key: NestedKey = ("next", "done")) -> in
     """The valid length every episode of ``storage`` shares, when its storage knows one, else ``None``.
 
     Lets a draw skip the per-row lengths in the usual case of episodes that all run a fixed length.
+
+    Args:
+        storage (Storage): an ``ndim=2`` storage of episode rows.
+        end_key (NestedKey, optional): the flag that ends an episode; the storage answers only when it cuts
+            episodes at the same key. Defaults to ``("next", "done")``.
 
     Examples:
         >>> from torchrl_cebp.replay import EpisodeStorage
@@ -149,6 +173,10 @@ def require_time_at(data: TensorDictBase, dim: int, dim_extends: Sequence[int] =
 def valid_steps(lengths: torch.Tensor, row_length: int) -> torch.Tensor:
     """``[n, T]`` mask of the steps inside each episode's valid length.
 
+    Args:
+        lengths (torch.Tensor): the episodes' valid lengths, shape ``[n]``.
+        row_length (int): ``T``, the steps a row holds.
+
     Examples:
         >>> valid_steps(torch.tensor([2, 4]), 4).int().tolist()
         [[1, 1, 0, 0], [1, 1, 1, 1]]
@@ -158,6 +186,9 @@ def valid_steps(lengths: torch.Tensor, row_length: int) -> torch.Tensor:
 
 def common_length(lengths: torch.Tensor) -> int | None:
     """The length all of ``lengths`` share, else ``None`` (also for none): draws then need no per-row lengths.
+
+    Args:
+        lengths (torch.Tensor): the episodes' valid lengths, shape ``[n]``.
 
     Examples:
         >>> common_length(torch.tensor([50, 50])), common_length(torch.tensor([50, 7]))

@@ -16,6 +16,10 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
     stored transition equally likely). It stays because episodes may end early:
     ``RandomSampler`` would draw their padding steps, this never does.
 
+    Args:
+        end_key (NestedKey, optional): the flag that ends an episode; no step after it is drawn.
+            Defaults to ``("next", "done")``.
+
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
