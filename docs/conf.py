@@ -124,7 +124,19 @@ def drop_type_docstrings(app, what, name, obj, options, lines) -> None:
         lines.clear()
 
 
+def init_signature(app, what, name, obj, options, signature, return_annotation):
+    """TorchRL's samplers have a metaclass whose ``__call__`` takes ``(*args, **kwargs)``, which autodoc would show as
+    every sampler's signature: show the constructor's instead."""
+    import inspect
+
+    if what == "class" and signature == "(*args, **kwargs)":
+        parameters = list(inspect.signature(obj.__init__).parameters.values())[1:]
+        return str(inspect.Signature(parameters)), return_annotation
+    return None
+
+
 def setup(app):
+    app.connect("autodoc-process-signature", init_signature)
     app.add_post_transform(LinkToData)
     app.connect("autodoc-process-docstring", drop_type_docstrings)
     app.connect("env-check-consistency", check_api_reference)

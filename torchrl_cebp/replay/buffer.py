@@ -24,8 +24,22 @@ def episode_storage(
 ) -> EpisodeStorage | EpisodeMemmapStorage:
     """An episode storage by name: ``"tensor"`` (in memory) or ``"memmap"`` (on disk).
 
-    ``capacity`` is counted in transitions: with 50-step episodes the default
-    1e6 is 20,000 episode rows.
+    Args:
+        capacity (int, optional): the storage size in transitions: with 50-step episodes the default
+            1e6 is 20,000 episode rows. Defaults to ``1_000_000``.
+
+    Keyword Args:
+        kind (str, optional): ``"tensor"`` (in memory) or ``"memmap"`` (on disk). Defaults to ``"tensor"``.
+        scratch_dir (str, optional): the folder of a ``"memmap"`` storage's files. Defaults to ``None``
+            (see :class:`~torchrl_cebp.replay.storage.EpisodeMemmapStorage`).
+        device (torch.device or str, optional): where the storage keeps its data. Defaults to ``"cpu"``.
+
+    Returns:
+        an empty :class:`~torchrl_cebp.replay.storage.EpisodeStorage` or
+        :class:`~torchrl_cebp.replay.storage.EpisodeMemmapStorage`.
+
+    Raises:
+        ValueError: if ``kind`` is neither ``"tensor"`` nor ``"memmap"``.
 
     Examples:
         >>> episode_storage(1000).ndim
@@ -45,6 +59,9 @@ class EpisodeReplayBuffer(TensorDictReplayBuffer):
     which a write ran (the storage's ``write_counts``) is drawn again: the priority, the valid length and
     the data of each drawn transition then come from the same write, and no padding step is returned
     (a plain :class:`~torchrl.data.TensorDictReplayBuffer` over the storage does not draw again).
+
+    Args:
+        **kwargs: the arguments of :class:`~torchrl.data.TensorDictReplayBuffer`, unchanged.
 
     Examples:
         >>> import torch
@@ -92,9 +109,36 @@ def make_replay_buffer(
     episode row, step) and, for samplers with importance-sampling weights,
     ``"priority_weight"``. With a :class:`~torchrl_cebp.replay.samplers.PERSampler` (or a per-worker sampler of
     them), ``rb.update_tensordict_priority(batch)`` feeds ``batch["td_error"]`` back.
-    ``generator`` drives every random draw of a sample: the sampler's and HER's.
-    ``writer``, ``prefetch``, ``pin_memory`` and ``shared`` mean what they mean to
-    :class:`~torchrl.data.ReplayBuffer`; HER keeps each prefetching thread's draw apart.
+
+    Args:
+        sampler (Sampler or None): the sampler of episode rows and steps; ``None`` draws uniformly
+            (:class:`~torchrl_cebp.replay.samplers.UniformEpisodeSampler`).
+        her (HindsightRelabel): relabels the goals and rewards of each drawn batch.
+
+    Keyword Args:
+        capacity (int, optional): the storage size in transitions; a
+            :class:`~torchrl_cebp.replay.samplers.PERSampler` must have the same ``max_size``.
+            Defaults to ``1_000_000``.
+        batch_size (int, optional): transitions per ``rb.sample()``. Defaults to ``256``.
+        storage (str, optional): the storage kind, ``"tensor"`` or ``"memmap"`` (see :func:`episode_storage`).
+            Defaults to ``"tensor"``.
+        scratch_dir (str, optional): the folder of a ``"memmap"`` storage's files. Defaults to ``None``.
+        device (torch.device or str, optional): where the storage keeps its data. Defaults to ``"cpu"``.
+        transform (Transform, optional): applied to each relabelled batch. Defaults to ``None``.
+        generator (torch.Generator, optional): drives every random draw of a sample: the sampler's and HER's.
+            Defaults to ``None`` (torch's default generator).
+        writer (Writer, optional): as for :class:`~torchrl.data.ReplayBuffer`. Defaults to ``None``.
+        prefetch (int, optional): as for :class:`~torchrl.data.ReplayBuffer`; HER keeps each prefetching
+            thread's draw apart. Defaults to ``None``.
+        pin_memory (bool, optional): as for :class:`~torchrl.data.ReplayBuffer`. Defaults to ``False``.
+        shared (bool, optional): as for :class:`~torchrl.data.ReplayBuffer`. Defaults to ``False``.
+
+    Returns:
+        an empty :class:`EpisodeReplayBuffer`.
+
+    Raises:
+        ValueError: if a :class:`~torchrl_cebp.replay.samplers.PERSampler`'s ``max_size`` is not ``capacity``,
+            or ``storage`` is not a known kind.
 
     Examples:
         >>> import torch

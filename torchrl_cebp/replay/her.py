@@ -49,20 +49,26 @@ class HindsightRelabel(SampleUnit):
     strictly later next-state, the relabelling happens before the transforms, and episodes are rows.
 
     Args:
-        reward_fn: vectorised sparse reward, ``[..., 3], [..., 3] -> [..., 1]`` (e.g. the env's
-            ``compute_reward``).
-        future_p: probability to relabel a transition (0.8 is HER's replay_k=4).
-        strategy: ``"future"``, ``"final"``, ``"episode"`` or ``"past"``.
-        goal_key, achieved_goal_key: keys of the goals at the root; their ``"next"`` counterparts
-            hold the next-states' goals.
-        reward_key: where the recomputed reward goes.
-        end_key: the flag that ends an episode before its row does.
-        relabelled_key: a bool entry of the sample info telling which transitions were relabelled
-            (``None`` to omit it).
-        success_key: the success flag of the next-state (the Fetch envs' ``is_success``), rewritten from the
-            relabelled reward: success where the reward is 0, as the sparse reward gives it only on reaching the goal.
-            ``None`` leaves it as stored (it then holds the stored goal's success, not the relabelled one's).
-            Defaults to ``("next", "is_success")``; a batch without it is left without it.
+        reward_fn (Callable[[torch.Tensor, torch.Tensor], torch.Tensor]): vectorised sparse reward,
+            ``[..., 3], [..., 3] -> [..., 1]`` (e.g. the env's ``compute_reward``).
+        future_p (float, optional): probability to relabel a transition (0.8 is HER's replay_k=4).
+            Defaults to ``0.8``.
+        strategy (str, optional): ``"future"``, ``"final"``, ``"episode"`` or ``"past"``.
+            Defaults to ``"future"``.
+        goal_key (NestedKey, optional): the desired goal at the root; its ``"next"`` counterpart holds the
+            next-state's. Defaults to ``"desired_goal"``.
+        achieved_goal_key (NestedKey, optional): the achieved goal at the root; its ``"next"`` counterpart
+            holds the next-state's, from which new goals are drawn. Defaults to ``"achieved_goal"``.
+        reward_key (NestedKey, optional): where the recomputed reward goes. Defaults to ``("next", "reward")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row does.
+            Defaults to ``("next", "done")``.
+        relabelled_key (NestedKey or None, optional): a bool entry of the sample info telling which
+            transitions were relabelled (``None`` to omit it). Defaults to ``"her_relabelled"``.
+        success_key (NestedKey or None, optional): the success flag of the next-state (the Fetch envs'
+            ``is_success``), rewritten from the relabelled reward: success where the reward is 0, as the sparse
+            reward gives it only on reaching the goal. ``None`` leaves it as stored (it then holds the stored
+            goal's success, not the relabelled one's); a batch without it is left without it.
+            Defaults to ``("next", "is_success")``.
 
     In a buffer the coin and the goal choice draw from the buffer's generator (``generator=`` or
     ``set_rng``; else torch's global one), the one the sampler draws from: ``rb.state_dict()``

@@ -22,10 +22,17 @@ ASSEMBLE_FRAMES = (
 
 
 def episode_rows(capacity: int, episode_steps: int) -> int:
-    """Rows an episode storage of ``capacity`` transitions holds for ``episode_steps``-step episodes.
+    """Rows an episode storage holds for episodes of a given length.
 
     TorchRL rounds up (a ``LazyTensorStorage`` with ``ndim=2`` allocates ``ceil(capacity / T)`` rows and
     raises its ``max_size`` to match), so 1e6 transitions of 70-step episodes are 14,286 rows.
+
+    Args:
+        capacity (int): the storage size in transitions.
+        episode_steps (int): ``T``, the steps of each episode row.
+
+    Returns:
+        ``ceil(capacity / episode_steps)``.
 
     Example:
         >>> episode_rows(1_000_000, 50), episode_rows(1_000_000, 70)
@@ -246,7 +253,7 @@ def _is_pair_index(index: Any) -> bool:
 
 
 class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
-    """In-memory TorchRL storage of episodes as ``[episode, t]`` rows; ``capacity`` in transitions.
+    """In-memory TorchRL storage of episodes as ``[episode, t]`` rows.
 
     A :class:`~torchrl.data.LazyTensorStorage` with ``ndim=2`` whose writes
     must be whole episodes of one fixed length (:class:`~torchrl_cebp.replay.EpisodeWriter`
@@ -258,6 +265,15 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
     one cache miss per entry, which is what makes a batch of 256 from 1M
     transitions cheap. With a round-robin writer (the default of every TorchRL
     buffer) the oldest episode is overwritten first.
+
+    Args:
+        capacity (int, optional): the storage size in transitions (see :func:`episode_rows` for the rows it
+            makes). Defaults to ``1_000_000``.
+
+    Keyword Args:
+        device (torch.device or str, optional): where the storage keeps its data. Defaults to ``"cpu"``.
+        end_key (NestedKey, optional): the flag at whose first ``True`` an episode ends before its row does.
+            Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
@@ -426,6 +442,15 @@ def _read_plan(fields: list[_Field]) -> tuple[list[tuple], int]:
 
 class EpisodeMemmapStorage(_EpisodeRows, LazyMemmapStorage):
     """The memory-mapped twin of :class:`EpisodeStorage`, for buffers larger than RAM.
+
+    Args:
+        capacity (int, optional): as for :class:`EpisodeStorage`. Defaults to ``1_000_000``.
+
+    Keyword Args:
+        scratch_dir (str, optional): the folder of the memory-mapped files. Defaults to ``None``
+            (temporary files, as for :class:`~torchrl.data.LazyMemmapStorage`).
+        device (torch.device or str, optional): as for :class:`EpisodeStorage`. Defaults to ``"cpu"``.
+        end_key (NestedKey, optional): as for :class:`EpisodeStorage`. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch, tempfile

@@ -36,9 +36,12 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
     dimension is not its last. ``rb.empty()`` drops the waiting frames too.
 
     Args:
-        max_episode_steps: the storage's row length, the longest episode (``env.max_episode_steps``).
-        end_key: the flag that ends an episode.
-        traj_key: the trajectory id of each frame, if the batch has it.
+        max_episode_steps (int): the storage's row length, the longest episode (``env.max_episode_steps``).
+        end_key (NestedKey, optional): the flag that ends an episode. Defaults to ``("next", "done")``.
+        traj_key (NestedKey, optional): the trajectory id of each frame, if the batch has it.
+            Defaults to ``("collector", "traj_ids")``.
+        compilable (bool, optional): whether the writer is compilable (TorchRL's writer argument); if ``True``,
+            the writer cannot be shared between processes. Defaults to ``False``.
 
     Examples:
         >>> from torchrl.collectors import Collector

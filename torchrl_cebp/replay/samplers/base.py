@@ -34,9 +34,13 @@ SAMPLER_STATE_FILE = "sampler_state.pt"
 
 
 def dump_state(sampler: Sampler, path: str | Path) -> None:
-    """The ``dumps`` of this package's samplers: ``sampler.state_dict()`` in the folder ``path``.
+    """The ``dumps`` of this package's samplers: writes ``sampler.state_dict()`` into a folder.
 
     PER's is TorchRL's own format instead, which TorchRL's :class:`~torchrl.data.PrioritizedSampler` reads too.
+
+    Args:
+        sampler (Sampler): the sampler whose state is written.
+        path (str or Path): the folder to write into; it is created if missing.
 
     Examples:
         >>> import tempfile
@@ -53,7 +57,12 @@ def dump_state(sampler: Sampler, path: str | Path) -> None:
 
 
 def load_state(sampler: Sampler, path: str | Path) -> None:
-    """The ``loads`` of this package's samplers: what :func:`dump_state` wrote into ``path``."""
+    """The ``loads`` of this package's samplers: loads what :func:`dump_state` wrote.
+
+    Args:
+        sampler (Sampler): the sampler that loads the state.
+        path (str or Path): the folder :func:`dump_state` wrote into.
+    """
     sampler.load_state_dict(torch.load(Path(path) / SAMPLER_STATE_FILE, weights_only=True))
 
 
@@ -62,7 +71,18 @@ def require_key(
 ) -> torch.Tensor:
     """Returns ``episodes[key]`` after checking it is there with shape ``[n, T, *trailing_shape]``.
 
-    ``None`` in ``trailing_shape`` accepts any size in that dimension.
+    Args:
+        episodes (TensorDictBase): the ``[n, T]`` episodes.
+        key (NestedKey): the entry to read.
+        trailing_shape (tuple of int or None): the shape of one step's entry; ``None`` accepts any size
+            in that dimension.
+
+    Returns:
+        the ``[n, T, *trailing_shape]`` tensor.
+
+    Raises:
+        KeyError: if ``episodes`` has no ``key``.
+        ValueError: if the entry has another shape.
 
     Examples:
         >>> from tensordict import TensorDict
@@ -92,7 +112,20 @@ def _shape_text(trailing_shape: tuple[int | None, ...]) -> str:
 
 def checked(owner: str, name: str, value: float, *, minimum: float = 0.0, exclusive: bool = False,
             maximum: float = math.inf) -> float:
-    """``value`` as a float, after checking it lies in the allowed range (``minimum`` excluded if ``exclusive``).
+    """Returns ``value`` as a float, after checking it lies in the allowed range.
+
+    Args:
+        owner (str): who checks, named in the error.
+        name (str): the parameter checked, named in the error.
+        value (float): the value to check.
+
+    Keyword Args:
+        minimum (float, optional): the lower bound. Defaults to ``0.0``.
+        exclusive (bool, optional): whether ``minimum`` itself is refused. Defaults to ``False``.
+        maximum (float, optional): the upper bound, included. Defaults to ``math.inf``.
+
+    Raises:
+        ValueError: if ``value`` lies outside the range; the message names it and the range.
 
     Examples:
         >>> checked("CEBPSampler", "beta", 1)
@@ -112,6 +145,14 @@ def checked(owner: str, name: str, value: float, *, minimum: float = 0.0, exclus
 def batch_normalised_weights(probabilities: torch.Tensor, n_episodes: int, beta: float) -> torch.Tensor:
     """Importance-sampling weights ``(N p)^-beta`` of drawn episodes, over the batch's largest (PER's form).
 
+    Args:
+        probabilities (torch.Tensor): ``p``, each drawn episode's draw probability.
+        n_episodes (int): ``N``, the number of stored episodes.
+        beta (float): the exponent; 0 weighs every draw alike.
+
+    Returns:
+        the weights, shaped as ``probabilities``, the largest being 1.
+
     Examples:
         >>> batch_normalised_weights(torch.tensor([0.5, 0.25]), 2, 1.0).tolist()
         [0.5, 1.0]
@@ -123,7 +164,19 @@ def batch_normalised_weights(probabilities: torch.Tensor, n_episodes: int, beta:
 def episode_positions(
     episodes: TensorDictBase, position_key: NestedKey, next_position_key: NestedKey
 ) -> torch.Tensor:
-    """Stacks the state before step 0 with every next-state: ``[n, T + 1, 3]``.
+    """Stacks the position before step 0 with every next position.
+
+    Args:
+        episodes (TensorDictBase): the ``[n, T]`` episodes.
+        position_key (NestedKey): the ``[n, T, 3]`` position before each step.
+        next_position_key (NestedKey): the ``[n, T, 3]`` position after each step.
+
+    Returns:
+        a float64 ``[n, T + 1, 3]`` tensor.
+
+    Raises:
+        KeyError: if an entry is missing (see :func:`require_key`).
+        ValueError: if an entry is not ``[n, T, 3]``.
 
     Examples:
         >>> from tensordict import TensorDict
@@ -138,7 +191,13 @@ def episode_positions(
 
 
 def stored_rows(index: torch.Tensor) -> torch.Tensor:
-    """Episode rows touched by a write, in order, from the ``[n * T, 2]`` index a buffer reports.
+    """Episode rows touched by a write, in order.
+
+    Args:
+        index (torch.Tensor): the ``[n * T, 2]`` index a buffer reports for a write (or a 1-d index of rows).
+
+    Returns:
+        the sorted unique rows.
 
     Examples:
         >>> stored_rows(torch.tensor([[3, 0], [3, 1], [0, 0], [0, 1]])).tolist()
@@ -151,7 +210,11 @@ def stored_rows(index: torch.Tensor) -> torch.Tensor:
 
 
 def split_index(index: torch.Tensor | tuple) -> tuple[torch.Tensor, torch.Tensor]:
-    """Returns ``(rows, steps)`` from a ``(rows, steps)`` tuple or a ``[B, 2]`` tensor."""
+    """Returns ``(rows, steps)`` from a sampled index.
+
+    Args:
+        index (torch.Tensor or tuple): a ``(rows, steps)`` tuple or a ``[B, 2]`` tensor.
+    """
     if isinstance(index, tuple):
         return index[0], index[1]
     return index[..., 0], index[..., 1]

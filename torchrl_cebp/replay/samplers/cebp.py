@@ -94,13 +94,17 @@ class CEBPSampler(_ContactEnergySampler):
     Touch is only used here, to prioritise replay: the policy never sees it.
 
     Args:
-        scale: the sigmoid's ``k`` (the paper's 100).
-        temperature: the sigmoid's ``T`` (the paper's 0.01; 5 for Slide, the env config's
-            ``cebp_temperature``).
-        beta: IS exponent (default 1.0).
-        touch_key, position_key, next_position_key: where touch ``[T, 2]`` and the object
-            position before each step and after it ``[T, 3]`` live.
-        end_key: the flag that ends an episode before its row does.
+        scale (float, optional): the sigmoid's ``k``. Defaults to ``100.0``, the paper's.
+        temperature (float, optional): the sigmoid's ``T``: the paper's 0.01, and 5 for Slide (the env config's
+            ``cebp_temperature``). Defaults to ``0.01``.
+        beta (float, optional): the IS exponent. Defaults to ``1.0``.
+        touch_key (NestedKey, optional): the touch of both finger pads, ``[T, 2]``. Defaults to ``("next", "touch")``.
+        position_key (NestedKey, optional): the object's position before each step, ``[T, 3]``.
+            Defaults to ``"achieved_goal"``.
+        next_position_key (NestedKey, optional): the object's position after each step, ``[T, 3]``.
+            Defaults to ``("next", "achieved_goal")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row does.
+            Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
@@ -161,12 +165,16 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
     batch maximum, all ones while fewer than 256 episodes are stored.
 
     Args:
-        k: the sigmoid's slope (the code's 0.1; 0.05 for Slide: the env config's ``cebp_released_k``).
-        workspace: the gripper's box ``((min x, y, z), (max x, y, z))`` (the env config's
-            ``gripper_workspace``), or ``None`` for no mask.
-        touch_key, position_key, next_position_key, end_key: as :class:`CEBPSampler`.
-        next_observation_key: the next observation, the gripper position at
-            ``FETCH_OBSERVATION.gripper_position``.
+        k (float, optional): the sigmoid's slope: the code's 0.1, and 0.05 for Slide (the env config's
+            ``cebp_released_k``). Defaults to ``0.1``.
+        workspace (tuple of two (x, y, z) tuples, optional): the gripper's box ``((min x, y, z), (max x, y, z))``
+            (the env config's ``gripper_workspace``); touch outside it does not count. Defaults to ``None``, no mask.
+        touch_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "touch")``.
+        position_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``"achieved_goal"``.
+        next_position_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "achieved_goal")``.
+        next_observation_key (NestedKey, optional): the next observation, which holds the gripper's position at
+            ``FETCH_OBSERVATION.gripper_position``. Defaults to ``("next", "observation")``.
+        end_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
@@ -212,9 +220,14 @@ class InitialCEBPSampler(_ContactEnergySampler):
     share the priority ``eps``, so the few with contact dominate the draw.
 
     Args:
-        beta: IS exponent (the commit's 0.7).
-        workspace, touch_key, position_key, next_position_key, next_observation_key, end_key: as
-            :class:`ReleasedCEBPSampler`.
+        beta (float, optional): the IS exponent. Defaults to ``0.7``, the commit's.
+        workspace (tuple of two (x, y, z) tuples, optional): as :class:`ReleasedCEBPSampler`. Defaults to ``None``.
+        touch_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "touch")``.
+        position_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``"achieved_goal"``.
+        next_position_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "achieved_goal")``.
+        next_observation_key (NestedKey, optional): as :class:`ReleasedCEBPSampler`.
+            Defaults to ``("next", "observation")``.
+        end_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch

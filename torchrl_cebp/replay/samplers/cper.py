@@ -15,10 +15,13 @@ class CPERSampler(EpisodePrioritySampler):
     step inside it by the same weights. No importance-sampling weights.
 
     Args:
-        threshold: cumulative touch (left + right) above which a step counts as contact-rich.
-        lam: weight of a contact-rich step (``lambda`` in the paper).
-        touch_key: where the per-step touch ``[T, 2]`` lives.
-        end_key: the flag that ends an episode before its row does.
+        threshold (float, optional): cumulative touch (left + right) above which a step counts as
+            contact-rich. Defaults to ``1.0``.
+        lam (float, optional): weight of a contact-rich step (``lambda`` in the paper). Defaults to ``10.0``.
+        touch_key (NestedKey, optional): the per-step touch of both finger pads, ``[T, 2]``.
+            Defaults to ``("next", "touch")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row does.
+            Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch

@@ -21,11 +21,17 @@ class EBPSampler(EpisodePrioritySampler):
     to ``energy^(1 / (temperature + 0.01))``. No importance-sampling weights.
 
     Args:
-        clip_energy: per-step clip (0.5 for PickAndPlace in the paper, 999 otherwise).
-        temperature: 1 by default.
-        w_potential, w_kinetic: weights of the two energy terms.
-        position_key, next_position_key: object position before / after each step.
-        end_key: the flag that ends an episode before its row does.
+        clip_energy (float, optional): per-step clip (0.5 for PickAndPlace in the paper, 999 otherwise).
+            Defaults to ``999.0``.
+        temperature (float, optional): sets the exponent ``1 / (temperature + 0.01)``. Defaults to ``1.0``.
+        w_potential (float, optional): weight of the potential energy term. Defaults to ``1.0``.
+        w_kinetic (float, optional): weight of the kinetic energy term. Defaults to ``1.0``.
+        position_key (NestedKey, optional): the object's position before each step, ``[T, 3]``.
+            Defaults to ``"achieved_goal"``.
+        next_position_key (NestedKey, optional): the object's position after each step, ``[T, 3]``.
+            Defaults to ``("next", "achieved_goal")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row does.
+            Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch

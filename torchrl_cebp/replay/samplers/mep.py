@@ -37,17 +37,24 @@ class MEPSampler(EpisodePrioritySampler):
     draws are uniform. No importance-sampling weights.
 
     Args:
-        n_components: mixture components (3 in MEP).
-        temperature: rank exponent is ``1 / (temperature + 0.01)``.
-        max_fit_episodes: fit on at most this many stored episodes drawn at
-            random (all are scored); bounds the refit cost on large buffers.
-        max_iter: EM iterations per refit.
-        reg_covar: added to the covariances' diagonal and to the Wishart prior's
+        n_components (int, optional): mixture components (3 in MEP). Defaults to ``3``.
+        temperature (float, optional): sets the rank exponent ``1 / (temperature + 0.01)``.
+            Defaults to ``1.0``.
+        max_fit_episodes (int, optional): fit on at most this many stored episodes drawn at
+            random (all are scored); bounds the refit cost on large buffers. Defaults to ``5000``.
+        max_iter (int, optional): EM iterations per refit. Defaults to ``100``.
+        reg_covar (float, optional): added to the covariances' diagonal and to the Wishart prior's
             (the data's covariance). Early buffers hold many identical
             trajectories (the object never moved), whose singular covariance
             breaks sklearn's default prior; 1e-4 is a 1 cm standard deviation
-            on positions in metres.
-        seed: seeds the mixture's initialisation and the fit subsample.
+            on positions in metres. Defaults to ``1e-4``.
+        seed (int, optional): seeds the mixture's initialisation and the fit subsample. Defaults to ``0``.
+        position_key (NestedKey, optional): the object's position before each step, ``[T, 3]``.
+            Defaults to ``"achieved_goal"``.
+        next_position_key (NestedKey, optional): the object's position after each step, ``[T, 3]``.
+            Defaults to ``("next", "achieved_goal")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row does.
+            Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch

@@ -226,10 +226,13 @@ class PerWorkerSampler(Sampler):
     ``W``, which Adam ignores (up to its epsilon).
 
     Args:
-        *samplers: one sampler per worker, each a fresh instance (the number of them is ``W``).
-        episodes_per_worker (int): consecutive episode rows each worker owns in turn: its envs per
+        *samplers (Sampler): one sampler per worker, each a fresh instance (the number of them is ``W``).
+        episodes_per_worker (int, optional): consecutive episode rows each worker owns in turn: its envs per
             cycle (baselines' ``rollout_batch_size``, 2). Write ``episodes_per_worker x W`` episodes
-            at a time, as the cycles of the trainer do.
+            at a time, as the cycles of the trainer do. Defaults to ``1``.
+
+    Raises:
+        ValueError: if no sampler is given, or one instance is given twice.
 
     Examples:
         >>> import torch
@@ -445,6 +448,10 @@ class EpisodePerWorkerSampler(PerWorkerSampler):
     An :class:`EpisodeSampler` over the whole storage: its episode count, draw probabilities and refit
     are the workers' together.
 
+    Args:
+        *samplers (EpisodeSampler): one episode sampler per worker, as for :class:`PerWorkerSampler`.
+        episodes_per_worker (int, optional): as for :class:`PerWorkerSampler`. Defaults to ``1``.
+
     Examples:
         >>> from torchrl_cebp.replay.samplers import UniformEpisodeSampler
         >>> sampler = PerWorkerSampler(UniformEpisodeSampler(), UniformEpisodeSampler())
@@ -476,6 +483,10 @@ class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
     A PrioritizedSampler to TorchRL, so that ``rb.update_tensordict_priority(batch)`` feeds the batch's
     priorities to :meth:`PerWorkerSampler.update_priority`, which routes each row to its worker's PER.
     Everything else is :class:`PerWorkerSampler`'s; none of PrioritizedSampler's own state is built.
+
+    Args:
+        *samplers (PrioritizedSampler): one PER per worker, as for :class:`PerWorkerSampler`.
+        episodes_per_worker (int, optional): as for :class:`PerWorkerSampler`. Defaults to ``1``.
 
     Examples:
         >>> import torch
