@@ -1,5 +1,6 @@
 """A damaged checkpoint costs one epoch: resume falls back to the previous epoch's checkpoint, and says so."""
 import logging
+import math
 import re
 import subprocess
 import sys
@@ -10,8 +11,10 @@ import torch
 from tests.tiny_run import REPO, TINY, TINY_RUN, config, copy_run, rows
 from torchrl_cebp.training import train
 from torchrl_cebp.training.checkpoint import (
-    CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME, RunCheckpoints, UnreadableFileError, load_file,
+    BEST_POLICY_NAME, CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME, BestPolicy, RunCheckpoints, UnreadableFileError,
+    load_file,
 )
+from torchrl_cebp.training.config import with_legacy_defaults
 
 
 def truncate(path):
@@ -113,3 +116,19 @@ def test_a_save_that_fails_midway_leaves_both_checkpoints_as_they_were(tmp_path)
     with pytest.raises(RuntimeError, match="Is a directory"):
         checkpoints.save({"epoch": 2})
     assert [load_file(tmp_path / name)["epoch"] for name in (CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME)] == [1, 0]
+
+
+@pytest.mark.parametrize("damage", ["empty", "truncated"])
+def test_a_damaged_best_policy_does_not_stop_a_resume(tmp_path, caplog, damage):
+    best = tmp_path / BEST_POLICY_NAME
+    best.write_bytes(b"" if damage == "empty" else b"PK\x03\x04" + b"\x00" * 100)
+    with caplog.at_level(logging.WARNING):
+        restored = BestPolicy(tmp_path, resume=True)
+    assert restored.test_success == -math.inf  # the next epoch's policy is offered as the best so far
+    assert str(best) in caplog.text and "the run's next policy replaces it" in caplog.text
+
+
+def test_a_checkpoint_naming_the_samplers_former_module_resumes_with_the_same_sampler():
+    saved = {"sampler": {"_target_": "torchrl_cebp.samplers.InitialCEBPSampler", "beta": 0.7}}
+    assert with_legacy_defaults(saved)["sampler"] == {
+        "_target_": "torchrl_cebp.replay.samplers.InitialCEBPSampler", "beta": 0.7}

@@ -380,7 +380,13 @@ class BestPolicy:
         self.path = Path(run_dir) / BEST_POLICY_NAME
         self.test_success = -math.inf
         if resume and self.path.is_file():
-            self.test_success = float(load_file(self.path)["test_success"])
+            # The best policy is a by-product of the run: a damaged one must not stop the run resuming.
+            try:
+                self.test_success = float(load_file(self.path)["test_success"])
+            except UnreadableFileError as error:
+                logger.warning(f"{error}; the run's next policy replaces it")
+            except (KeyError, TypeError, ValueError):
+                logger.warning(f"{self.path} holds no test success; the run's next policy replaces it")
 
     def offer(self, state: dict[str, Any]) -> bool:
         """Writes ``state`` if it scores at least the best so far.

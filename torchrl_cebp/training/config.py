@@ -255,6 +255,8 @@ RUN_DEFINING_KEYS = (
 # What a checkpoint made before a run-defining key existed ran with: checkpoints before per-worker replay
 # merged the workers' episodes into one buffer, those before env.episode_steps ran the task's own length, and
 # those before env.grasped_start started every episode from the table.
+# The samplers' module before it moved into the replay package: checkpoints of older runs name their sampler by it.
+MOVED_SAMPLERS_MODULE, SAMPLERS_MODULE = "torchrl_cebp.samplers.", "torchrl_cebp.replay.samplers."
 LEGACY_DEFAULTS: dict[tuple[str, str], object] = {
     ("replay", "per_worker"): False, ("replay", "capacity_per"): "total", ("env", "episode_steps"): None,
     ("env", "grasped_start"): 0.0,
@@ -270,11 +272,16 @@ def with_legacy_defaults(saved: dict) -> dict:
     Example:
         >>> with_legacy_defaults({"replay": {"capacity": 10}})["replay"]
         {'capacity': 10, 'per_worker': False, 'capacity_per': 'total'}
+        >>> with_legacy_defaults({"sampler": {"_target_": "torchrl_cebp.samplers.CEBPSampler"}})["sampler"]
+        {'_target_': 'torchrl_cebp.replay.samplers.CEBPSampler'}
     """
     saved = {**saved}
     for (group, key), value in LEGACY_DEFAULTS.items():
         if isinstance(saved.get(group), dict) and key not in saved[group]:
             saved[group] = {**saved[group], key: value}
+    sampler = saved.get("sampler")
+    if isinstance(sampler, dict) and str(sampler.get("_target_", "")).startswith(MOVED_SAMPLERS_MODULE):
+        saved["sampler"] = {**sampler, "_target_": sampler["_target_"].replace(MOVED_SAMPLERS_MODULE, SAMPLERS_MODULE, 1)}
     return saved
 
 
