@@ -58,6 +58,12 @@ plot "$results" --panels push-standard \
   --reference "$paper" --out "$results/is_weights.png" \
   --title "Push, robot A: the Initial commit's CEBP with and without its IS weights, 3 seeds" \
   --table 10 12 --improvement-at 10 12
+question "Does the sigmoid temperature matter, as the paper's ablation says?"
+plot "$results" --panels push-standard-temperature --against 'cebp_T(.+)/paper-per_worker' --at 10 12 \
+  --parameter-values 0.001 0.01 0.1 1 5 \
+  --against-references push-standard/her/paper push-standard/cper/paper-per_worker-her_past \
+  push-standard/cebp_initial/paper-per_worker --out "$results/push_temperature.png" \
+  --title "The paper-form CEBP's sigmoid temperature on robot A's Push, with HER, CPER and the Initial commit's CEBP"
 question "The normalised critic loss (superseded), robot A"
 plot "$results" --panels "${robot_a[@]}" \
   --configurations 'her/*' 'cebp_initial/paper-per_worker' 'cebp_initial/paper-per_worker-wnorm' \

@@ -13,6 +13,7 @@ from torchrl_cebp.plot import (
     iqm_band,
     main,
     method_label,
+    plot_against_parameter,
     select_configurations,
     summary_table,
 )
@@ -366,3 +367,57 @@ def test_configurations_keep_the_methods_asked_for_and_their_published_values(tm
         draw_sweep(tmp_path, reference=reference, reference_panel="slide-standard")
     push, slide = draw_sweep(tmp_path, reference=reference, reference_panel="push-standard").axes
     assert sorted(legend(slide)) == ["CPER (1 seed)", "CPER (paper)", "HER (paper)"]  # push's values on every panel
+
+
+def test_against_parameter_draws_each_values_iqm_and_the_references_levels(tmp_path):
+    for seed, (early, late) in enumerate([(0.2, 0.6), (0.4, 0.8), (0.3, 0.7)]):
+        write_run(tmp_path / f"push-temperature/cebp_T0.01/paper/seed{seed}", [0.0, early, late])
+        write_run(tmp_path / f"push-standard/her/paper/seed{seed}", [0.0, 0.1 * seed, 0.5 + 0.1 * seed])
+    write_run(tmp_path / "push-temperature/cebp_T5/paper/seed0", [0.0, 0.1, 0.9])
+    write_run(tmp_path / "push-temperature/cebp_T5/paper/seed1", [0.0, 0.3])  # not yet at epoch 3
+    write_run(tmp_path / "push-temperature/cebp_initial/paper/seed0", [0.0, 1.0, 1.0])  # not a temperature
+    out = tmp_path / "against.png"
+    drawn = plot_against_parameter(tmp_path, "push-temperature", r"cebp_T(.+)/paper", ["push-standard/her/paper"],
+                                   [2, 3], out, planned_values=[0.001, 0.01, 5])
+    assert drawn[2]["parameter"][0.01][0] == pytest.approx(0.3)  # the IQM of 0.2, 0.3, 0.4
+    assert drawn[2]["parameter"][5.0][0] == pytest.approx(0.2) and drawn[2]["parameter"][5.0][3] == 2
+    assert drawn[3]["parameter"][5.0] == (0.9, 0.9, 0.9, 1)
+    assert drawn[3]["parameter"][0.01][3] == 3 and drawn[3]["parameter"][0.01][0] == pytest.approx(0.7)
+    assert drawn[3]["references"]["push-standard/her/paper"][0] == pytest.approx(0.6)
+    assert np.asarray(Image.open(out).convert("RGB")).std() > 10
+
+
+def test_against_parameter_draws_the_returned_values_with_a_hollow_marker_where_seeds_are_missing(tmp_path):
+    for seed in range(3):
+        write_run(tmp_path / f"sweep/cebp_T0.1/paper/seed{seed}", [0.2 * seed])
+        write_run(tmp_path / f"base/her/paper/seed{seed}", [0.5])
+    write_run(tmp_path / "sweep/cebp_T1/paper/seed0", [0.4])
+    figures = []
+    with pytest.MonkeyPatch.context() as patch:  # keep the figure open to read what was drawn
+        patch.setattr(plt, "close", figures.append)
+        plot_against_parameter(tmp_path, "sweep", r"cebp_T(.+)/paper", ["base/her/paper"], [1], tmp_path / "a.png")
+    (ax,) = figures[0].axes
+    assert ax.get_xscale() == "log"
+    markers = {(line.get_xdata()[0], line.get_ydata()[0]): line for line in ax.get_lines() if line.get_marker() == "o"}
+    (solid, hollow) = sorted(markers.items())
+    assert solid[0][1] == pytest.approx(0.2) and solid[1].get_markerfacecolor() != "white"
+    assert hollow[0][1] == pytest.approx(0.4) and hollow[1].get_markerfacecolor() == "white"
+    assert sorted(text.get_text() for text in ax.texts) == ["n=1", "n=3"]
+    (her,) = [line for line in ax.get_lines() if line.get_label().startswith("HER")]
+    assert list(her.get_ydata()) == [0.5, 0.5]
+    plt.close(figures[0])
+
+
+def test_against_parameter_refuses_what_it_cannot_draw(tmp_path):
+    write_run(tmp_path / "sweep/cebp_T0/paper/seed0", [0.4])
+    write_run(tmp_path / "sweep/cebp_T2/other/seed0", [0.4])
+    with pytest.raises(ValueError, match="not a positive number"):
+        plot_against_parameter(tmp_path, "sweep", r"cebp_T(.+)/paper", [], [1], tmp_path / "a.png")
+    with pytest.raises(KeyError, match="matches no configuration"):
+        plot_against_parameter(tmp_path, "sweep", r"cper_T(.+)/paper", [], [1], tmp_path / "a.png")
+    with pytest.raises(ValueError, match="has no group"):
+        plot_against_parameter(tmp_path, "sweep", r"cebp_T2/other", [], [1], tmp_path / "a.png")
+    with pytest.raises(ValueError, match="reached any of epochs=\\[5\\]"):
+        plot_against_parameter(tmp_path, "sweep", r"cebp_T(.+)/other", [], [5], tmp_path / "a.png")
+    with pytest.raises(KeyError, match="reference 'base/her/paper' has no runs"):
+        plot_against_parameter(tmp_path, "sweep", r"cebp_T(.+)/other", ["base/her/paper"], [1], tmp_path / "a.png")

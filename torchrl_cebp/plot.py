@@ -8,6 +8,8 @@
     python -m torchrl_cebp.plot runs --table 10 --mean-over 6 10   # and each seed's mean over epochs 6-10
     python -m torchrl_cebp.plot runs --panels pick_place-standard push-standard --reference docs/results/paper_fig2.csv
     python -m torchrl_cebp.plot runs --configurations 'her/*' 'cper/*'   # these methods only
+    python -m torchrl_cebp.plot runs --panels push-standard-temperature --against 'cebp_T(.+)/paper-per_worker' \
+        --at 10 12 --against-references push-standard/her/paper   # success after 10 and 12 epochs against T
 
 The statistics follow rliable's conventions (:mod:`torchrl_cebp.stats`): IQM, stratified-bootstrap
 95% confidence intervals, and the probability of improvement over a baseline configuration.
@@ -34,7 +36,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
+from matplotlib.ticker import MaxNLocator, NullLocator  # noqa: E402
 import numpy as np  # noqa: E402
 
 from torchrl_cebp.stats import (  # noqa: E402
@@ -667,6 +669,190 @@ def plot_sweep(
     return out
 
 
+def values_at_epoch(curves: list[np.ndarray], n: int) -> list[float]:
+    """Each seed's value after ``n`` epochs, over the seeds that got there.
+
+    Args:
+        curves (list of np.ndarray): one curve per seed, indexed by epoch.
+        n (int): the epochs trained (from 1).
+
+    Examples:
+        >>> values_at_epoch([np.array([0.1, 0.2]), np.array([0.3])], 2)
+        [0.2]
+    """
+    return [float(curve[n - 1]) for curve in curves if len(curve) >= n]
+
+
+def seeds_summary(per_seed: list[float]) -> tuple[float, float, float, int]:
+    """``(IQM, low, high, seeds)``: the IQM of the seeds' values, its 95% stratified-bootstrap CI and their number.
+
+    Args:
+        per_seed (list of float): one value per seed (at least one).
+
+    Examples:
+        >>> seeds_summary([0.25, 0.75])
+        (0.5, 0.25, 0.75, 2)
+    """
+    low, high = stratified_bootstrap_ci(per_seed)
+    return float(iqm(per_seed)), float(low), float(high), len(per_seed)
+
+
+PARAMETER_DODGE = 0.03  # decades between the epoch counts' points at one parameter value, so error bars stay apart
+REFERENCE_LINESTYLES = ("--", ":", "-.")
+
+
+def plot_against_parameter(
+    root: str | Path,
+    panel: str,
+    parameter_pattern: str,
+    references: Sequence[str],
+    epochs: Sequence[int],
+    out: str | Path,
+    metric: str = "test_success",
+    parameter_name: str = "sigmoid temperature T",
+    full_seeds: int | None = None,
+    title: str | None = None,
+    planned_values: Sequence[float] = (),
+) -> dict[int, dict[str, dict]]:
+    """The metric after each of ``epochs`` epochs against a parameter the run folders name, on a log x axis, with
+    reference configurations as horizontal lines; written to a PNG.
+
+    One line per epoch count joins the IQM over seeds at each parameter value, with its 95% stratified-bootstrap CI
+    as error bars, each point annotated with its seed count (a hollow marker where it has fewer than
+    ``full_seeds``). Each reference configuration is a horizontal line at its IQM, with a light band for its CI, in
+    the colour of the epoch count. A parameter value whose runs have not reached an epoch count has no point there.
+
+    Args:
+        root (str or Path): the sweep folder (see :func:`collect_sweep`).
+        panel (str): the task folder of the parameter's runs, e.g. ``"push-standard-temperature"``.
+        parameter_pattern (str): a regular expression that matches, in full, the configuration labels of ``panel``
+            to draw; its first group is the parameter value, e.g. ``r"cebp_T(.+)/paper-per_worker"``.
+        references (sequence of str): ``"<panel>/<sampler>/<variant>"`` of each reference configuration, e.g.
+            ``"push-standard/her/paper"``.
+        epochs (sequence of int): the epoch counts (from 1) to draw a line each.
+        out (str or Path): the PNG's path.
+        metric (str, optional): the CSV column drawn. Defaults to ``"test_success"``.
+        parameter_name (str, optional): the parameter's name on the x axis and in the legend. Defaults to
+            ``"sigmoid temperature T"``.
+        full_seeds (int, optional): the seeds a point needs to be drawn solid. Defaults to ``None``: the most seeds
+            any point or reference drawn has.
+        title (str, optional): the figure's title. Defaults to ``None``: the panel's task and the parameter.
+        planned_values (sequence of float, optional): the values the study runs; the x axis spans and ticks them
+            all, so that a value without runs yet is seen to be missing. Defaults to none (the values with runs).
+
+    Returns:
+        ``{n: {"parameter": {value: (iqm, low, high, seeds)}, "references": {reference: (iqm, low, high, seeds)}}}``
+        per epoch count ``n``, as drawn (a reference without a seed at ``n`` is left out).
+
+    Raises:
+        ValueError: an epoch count below 1, a parameter value that is not a positive number, a pattern without a
+            group, or no run of the parameter that has reached any of ``epochs``.
+        KeyError: ``panel`` or a reference has no runs, or ``parameter_pattern`` matches no configuration.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     for label, values in (("push-temperature/cebp_T0.1/paper", (0.2, 0.6)),
+        ...                           ("push-temperature/cebp_T5/paper", (0.1, 0.4)),
+        ...                           ("push-standard/her/paper", (0.2, 0.5))):
+        ...         run = Path(d) / label / "seed0"
+        ...         run.mkdir(parents=True)
+        ...         rows = [f"{e},{v}" for e, v in enumerate(values)]
+        ...         _ = (run / CSV_NAME).write_text("\\n".join(["epoch,test_success", *rows]) + "\\n")
+        ...     drawn = plot_against_parameter(d, "push-temperature", r"cebp_T(.+)/paper", ["push-standard/her/paper"],
+        ...                                    [2], Path(d) / "against.png")
+        >>> drawn[2]["parameter"]
+        {0.1: (0.6, 0.6, 0.6, 1), 5.0: (0.4, 0.4, 0.4, 1)}
+        >>> drawn[2]["references"]
+        {'push-standard/her/paper': (0.5, 0.5, 0.5, 1)}
+    """
+    if any(n < 1 for n in epochs):
+        raise ValueError(f"epochs={list(epochs)}: epoch counts start at 1")
+    groups = collect_sweep(Path(root), metric)
+    if panel not in groups:
+        raise KeyError(f"no runs for panel {panel!r} under {root}; its panels: {sorted(groups)}")
+    pattern = re.compile(parameter_pattern)
+    if pattern.groups < 1:
+        raise ValueError(f"parameter_pattern={parameter_pattern!r} has no group to read the parameter value from")
+    by_value: dict[float, list[np.ndarray]] = {}
+    for label, curves in groups[panel].items():
+        match = pattern.fullmatch(label)
+        if match is None:
+            continue
+        try:
+            value = float(match.group(1))
+        except ValueError:
+            value = float("nan")
+        if not value > 0:
+            raise ValueError(f"{label}: parameter {match.group(1)!r} is not a positive number, which a log axis needs")
+        by_value[value] = curves
+    if not by_value:
+        raise KeyError(f"{parameter_pattern!r} matches no configuration of {panel}: {sorted(groups[panel])}")
+    reference_curves = {}
+    for reference in references:
+        reference_panel, _, label = reference.partition("/")
+        if label not in groups.get(reference_panel, {}):
+            known = sorted(f"{p}/{known_label}" for p, labels in groups.items() for known_label in labels)
+            raise KeyError(f"reference {reference!r} has no runs under {root}; the configurations: {known}")
+        reference_curves[reference] = groups[reference_panel][label]
+
+    drawn: dict[int, dict[str, dict]] = {}
+    for n in epochs:
+        parameter = {value: seeds_summary(values_at_epoch(curves, n)) for value, curves in sorted(by_value.items())
+                     if values_at_epoch(curves, n)}
+        reference_levels = {reference: seeds_summary(values_at_epoch(curves, n))
+                            for reference, curves in reference_curves.items() if values_at_epoch(curves, n)}
+        drawn[n] = {"parameter": parameter, "references": reference_levels}
+    if not any(drawn[n]["parameter"] for n in drawn):
+        raise ValueError(f"no run of {parameter_pattern!r} in {panel} has reached any of epochs={list(epochs)}")
+    full = full_seeds if full_seeds is not None else max(
+        seeds for summary in drawn.values() for kind in summary.values() for *_, seeds in kind.values()
+    )
+    palette = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    reference_style = {reference: REFERENCE_LINESTYLES[i % len(REFERENCE_LINESTYLES)]
+                       for i, reference in enumerate(references)}
+    caption_text = (
+        f"Points: IQM of {metric.replace('_', ' ')} over the seeds named (n); hollow: fewer than {seed_count(full)};"
+        " bars: 95% stratified-bootstrap CI. Lines: the reference methods' IQM, light bands their CI,"
+        " in the colour of the epoch count."
+    )
+    fig, ax = plt.subplots(figsize=(7, 6.2))
+    for i, (n, summary) in enumerate(drawn.items()):
+        colour = palette[i % len(palette)]
+        dodge = 10 ** (PARAMETER_DODGE * (i - (len(drawn) - 1) / 2))
+        if summary["parameter"]:
+            values = np.array(list(summary["parameter"]))
+            mean, low, high, seeds = map(np.array, zip(*summary["parameter"].values()))
+            x = values * dodge
+            ax.plot(x, mean, color=colour, label=f"each {parameter_name.split()[-1]}, {epochs_phrase(n)}")
+            ax.errorbar(x, mean, yerr=[mean - low, high - mean], fmt="none", ecolor=colour, capsize=4)
+            for xi, yi, count in zip(x, mean, seeds):
+                ax.plot(xi, yi, marker="o", markersize=8, color=colour, linestyle="none",
+                        markerfacecolor=colour if count >= full else "white", markeredgewidth=1.5)
+                ax.annotate(f"n={count}", (xi, yi), textcoords="offset points", xytext=(9, 2), fontsize=8,
+                            color=colour)
+        for reference, (level, low, high, seeds) in summary["references"].items():
+            ax.axhline(level, color=colour, linestyle=reference_style[reference], linewidth=1.2,
+                       label=f"{method_label(reference.partition('/')[2])} {epochs_phrase(n)} ({seed_count(seeds)})")
+            ax.axhspan(low, high, color=colour, alpha=0.07)
+    ax.set_xscale("log")
+    ticks = sorted({*by_value, *planned_values})
+    ax.set_xticks(ticks, [f"{value:g}" for value in ticks])
+    ax.xaxis.set_minor_locator(NullLocator())
+    ax.set_xlim(ticks[0] / 2, ticks[-1] * 2)
+    ax.set_xlabel(f"{parameter_name} (log scale)")
+    ax.set_ylabel(f"{metric.replace('_', ' ')} (IQM, 95% CI)")
+    default_title = f"{panel_title(panel)}: against the {parameter_name}"
+    ax.set_title(textwrap.fill(title if title is not None else default_title, 60))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 0), borderaxespad=4.5, ncol=2)
+    fig.text(0.5, 0.01, "\n".join(textwrap.wrap(caption_text, 110)), ha="center", va="bottom", fontsize=8)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return drawn
+
+
 def iqm_cell(per_seed: list[float], seeds_in_total: int) -> str:
     """``IQM [95% CI]`` of the seeds' values, naming how many when not all seeds count.
 
@@ -786,15 +972,12 @@ def summary_table(
     header.append("training hours")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
 
-    def at_epoch(curves: list[np.ndarray], n: int) -> list[float]:
-        return [curve[n - 1] for curve in curves if len(curve) >= n]
-
     for panel, curves_by_label in values.items():
         baselines = [curves for label, curves in curves_by_label.items() if sampler_of(label) == baseline]
         for label, curves in sorted(curves_by_label.items(), key=lambda item: method_order(item[0])):
             cells = [panel_title(panel), method_label(label), label, str(len(curves))]
             for n in after_epochs:
-                cells.append(iqm_cell(at_epoch(curves, n), len(curves)))
+                cells.append(iqm_cell(values_at_epoch(curves, n), len(curves)))
             if mean_over is not None:
                 first, last = mean_over
                 window = [curve[first - 1 : last].mean() for curve in curves if len(curve) >= last]
@@ -803,8 +986,8 @@ def summary_table(
                 cells.extend("(baseline)" for _ in improvement_at)
             else:
                 for n in improvement_at:
-                    reference = at_epoch(baselines[0], n) if len(baselines) == 1 else []
-                    cells.append(improvement_cell(at_epoch(curves, n), reference))
+                    reference = values_at_epoch(baselines[0], n) if len(baselines) == 1 else []
+                    cells.append(improvement_cell(values_at_epoch(curves, n), reference))
             hours = sum(curve.sum() for curve in epoch_seconds[panel][label]) / 3600
             cells.append(f"{hours:.1f}")
             lines.append("| " + " | ".join(cells) + " |")
@@ -926,7 +1109,49 @@ def main(argv: list[str] | None = None) -> None:
         "--tables-out", metavar="MD",
         help="with --table: also write one table per task to this Markdown file, each with the epochs its runs reached",
     )
+    parser.add_argument(
+        "--against", metavar="REGEX",
+        help="instead of curves: the metric after --at epochs against the parameter that the first group of REGEX"
+             " reads from the configurations of the one --panels folder, on a log axis",
+    )
+    parser.add_argument("--at", nargs="+", type=int, default=[], metavar="N", help="with --against: the epoch counts")
+    parser.add_argument(
+        "--against-references", nargs="+", default=[], metavar="PANEL/SAMPLER/VARIANT",
+        help="with --against: configurations drawn as horizontal reference lines",
+    )
+    parser.add_argument("--parameter-name", default="sigmoid temperature T", help="with --against: the x axis's name")
+    parser.add_argument(
+        "--parameter-values", nargs="+", type=float, default=[], metavar="VALUE",
+        help="with --against: the values the study runs, ticked on the x axis whether they have runs yet or not",
+    )
     args = parser.parse_args(argv)
+    if args.against:
+        if not args.at or args.panels is None or len(args.panels) != 1:
+            parser.error("--against needs --at and exactly one --panels folder")
+        for option, value in (
+            ("--table", args.table), ("--reference", args.reference), ("--configurations", args.configurations),
+            ("--log-y", args.log_y),
+        ):
+            if value:
+                parser.error(f"{option} does not go with --against: the pattern picks the configurations drawn")
+        out = args.out or Path(args.root) / f"{args.metric}_against_parameter.png"
+        drawn = plot_against_parameter(args.root, args.panels[0], args.against, args.against_references, args.at,
+                                       out, args.metric, args.parameter_name, title=args.title,
+                                       planned_values=args.parameter_values)
+        print(f"wrote {out}")
+        for n, summary in drawn.items():
+            for value, (level, low, high, seeds) in summary["parameter"].items():
+                print(f"{epochs_phrase(n)}: {args.parameter_name} = {value:g}: {level:.2f} [{low:.2f}, {high:.2f}]"
+                      f" ({seed_count(seeds)})")
+            for reference, (level, low, high, seeds) in summary["references"].items():
+                print(f"{epochs_phrase(n)}: {reference}: {level:.2f} [{low:.2f}, {high:.2f}] ({seed_count(seeds)})")
+        return
+    for option, value in (
+        ("--at", args.at), ("--against-references", args.against_references),
+        ("--parameter-values", args.parameter_values),
+    ):
+        if value:
+            parser.error(f"{option} goes with --against: give --against too")
     for option, value in (
         ("--mean-over", args.mean_over), ("--improvement-at", args.improvement_at), ("--tables-out", args.tables_out)
     ):
