@@ -9,7 +9,7 @@ from torchrl.data import RoundRobinWriter
 from tests.modules import load_module
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, restore, sparse_reward
 from tests.replay.test_her import decode, labelled_episodes
-from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
+from torchrl_cebp.replay import EpisodeReplayBuffer, EpisodeStorage, HindsightRelabel, make_replay_buffer
 from torchrl_cebp.replay.samplers import CEBPSampler, InitialCEBPSampler, ReleasedCEBPSampler, CPERSampler, EBPSampler, MEPSampler, PERSampler, UniformEpisodeSampler
 
 SAMPLERS = {  # each built for a buffer of the given capacity
@@ -246,3 +246,15 @@ def test_the_rows_not_yet_filled_take_no_memory(how):
     added = _resident_mib() - before
     assert added < 60, f"{added:.0f} MiB resident for 2 episodes"
     assert saved.storage.max_size == capacity and len(saved) == 2 * T
+
+
+def test_a_write_that_never_finished_stops_the_draws_with_how_to_recover():
+    rb = EpisodeReplayBuffer(storage=EpisodeStorage(4 * T), dim_extend=0, batch_size=8)
+    rb.extend(make_episodes(2))
+    rb.storage.write_counts[-1] += 1  # a writer killed between the start and the end of its write
+    rb.write_timeout_s = 0.2
+    with pytest.raises(RuntimeError, match=r"stayed odd \(3\) for over 0.2 s.*died mid-write.*from a checkpoint"):
+        rb.sample()
+    recovered = EpisodeReplayBuffer(storage=EpisodeStorage(4 * T), dim_extend=0, batch_size=8)
+    recovered.load_state_dict(rb.state_dict())
+    assert recovered.sample()["observation"].shape == (8, 25)

@@ -7,8 +7,8 @@ from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuff
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
 
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
-from tests.replay.test_samplers import hand_made, np_initial_cebp
-from torchrl_cebp.replay import EpisodeStorage, HindsightRelabel, make_replay_buffer
+from tests.replay.test_samplers import ScoredByValue, hand_made, np_initial_cebp, valued
+from torchrl_cebp.replay import EpisodeReplayBuffer, EpisodeStorage, HindsightRelabel, make_replay_buffer
 from torchrl_cebp.replay.samplers import (
     InitialCEBPSampler,
     MEPSampler,
@@ -240,3 +240,17 @@ def test_the_workers_score_the_episodes_a_spawned_process_writes():
     assert set(rows.tolist()) == set(range(8))  # rows 4-7, written in the child, are drawn too
     assert (rows[:256] % 4 < 2).all() and (rows[256:] % 4 >= 2).all()  # each worker from its own rows
     assert [shard.n_episodes for shard in sampler.samplers] == [4, 4]
+
+
+def test_a_write_into_none_of_a_workers_rows_after_the_wrap_keeps_it_drawing():
+    # 5 rows, not a multiple of the 2-episode cycle: the third write wraps to rows 4 and 0, both worker 0's
+    # (rows 0, 2, 4; worker 1 has rows 1 and 3), so worker 1 sees the write count change but none of its rows.
+    sampler = PerWorkerSampler(ScoredByValue(), ScoredByValue())
+    rb = EpisodeReplayBuffer(storage=EpisodeStorage(5 * T), sampler=sampler, dim_extend=0, batch_size=4)
+    for values in [(1, 2), (3, 4), (5, 6)]:
+        rb.extend(valued(*values))
+        rb.sample()
+    assert [shard.state_dict()["priorities"].tolist() for shard in sampler.samplers] == [[6, 3, 5], [2, 4]]
+    rb.extend(valued(7, 8))  # rows 1 and 2: one of each worker's, scored at the next draw
+    rb.sample()
+    assert [shard.state_dict()["priorities"].tolist() for shard in sampler.samplers] == [[6, 8, 5], [7, 4]]

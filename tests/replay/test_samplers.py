@@ -23,6 +23,7 @@ from torchrl_cebp.replay.samplers import (
     ReleasedCEBPSampler,
     CPERSampler,
     EBPSampler,
+    EpisodePrioritySampler,
     MEPSampler,
     PERSampler,
     UniformEpisodeSampler,
@@ -608,3 +609,65 @@ def test_episodes_a_spawned_process_writes_are_scored_and_drawn_within_their_len
     new = TensorDictReplayBuffer(storage=rb.storage, sampler=CEBPSampler(), dim_extend=0, batch_size=64)
     new.sample()
     torch.testing.assert_close(rb.sampler.state_dict()["priorities"], new.sampler.state_dict()["priorities"])
+
+
+class ScoredByValue(EpisodePrioritySampler):
+    """Scores each episode by its ``"value"`` entry: priorities a test can predict."""
+
+    def episode_priority(self, episodes, valid):
+        return episodes["value"][:, 0].double()
+
+
+def valued(*values: float) -> TensorDict:
+    """One episode per value, each step holding it."""
+    return TensorDict({"value": torch.tensor(values)[:, None].expand(-1, T).clone()}, [len(values), T])
+
+
+@pytest.mark.parametrize("storage", [EpisodeStorage, functools.partial(LazyTensorStorage, ndim=2)],
+                         ids=["an episode storage", "TorchRL's storage"])
+def test_a_restored_sampler_scores_the_first_write_after_the_restore(storage):
+    def buffer():
+        return TensorDictReplayBuffer(storage=storage(4 * T), sampler=ScoredByValue(), dim_extend=0, batch_size=64)
+
+    saved = buffer()
+    saved.extend(valued(1, 1))
+    saved.extend(valued(1, 1))
+    restored = buffer()
+    restored.load_state_dict(saved.state_dict())
+    restored.extend(valued(0, 0))  # rows 0 and 1: episodes of priority 0
+    assert restored.sampler.state_dict()["priorities"].tolist() == [0, 0, 1, 1]
+    assert set(restored.sample(return_info=True)[1]["index"][0].tolist()) <= {2, 3}
+
+
+def _overwrite_with_short_episodes(rb):
+    rb.extend(_ending_at([2] * 4, seed=1))
+
+
+def test_a_reloaded_storage_sent_to_a_spawned_process_shares_its_writes():
+    # Before its first write or draw, a reloaded storage's blocks, lengths and write counts must already exist:
+    # built later, each process would build its own, and the child's writes would never reach the parent.
+    saved = make_replay_buffer(UniformEpisodeSampler(), HindsightRelabel(sparse_reward), capacity=4 * T,
+                               batch_size=256)
+    saved.extend(_ending_at([T] * 4, seed=0))
+    rb = make_replay_buffer(UniformEpisodeSampler(), HindsightRelabel(sparse_reward), capacity=4 * T,
+                            batch_size=256)
+    rb.load_state_dict(saved.state_dict())
+    child = torch.multiprocessing.get_context("spawn").Process(target=_overwrite_with_short_episodes, args=(rb,))
+    child.start()
+    rb.sample()  # the parent draws while the child writes
+    child.join(timeout=120)
+    assert child.exitcode == 0
+    assert rb.storage.write_counts[:4].tolist() == [1, 1, 1, 1]
+    assert torch.equal(rb.storage.valid_lengths(torch.arange(4)), torch.full((4,), 2))
+    assert bool((rb.storage.get(slice(0, 4))["observation"][:, 2:] == -1).all())  # the child's padding
+    assert bool((rb.sample()["observation"] >= 0).all())
+
+
+@pytest.mark.parametrize(("lengths", "common"), [([T] * 4, T), ([T, 7, T, T], None), ([7] * 4, 7), ([7, 7, 9, 7], None)],
+                         ids=["whole", "some short", "all short alike", "all short unlike"])
+def test_the_storage_names_the_length_its_episodes_share(lengths, common):
+    storage = EpisodeStorage(4 * T)
+    storage.set(torch.arange(4), _ending_at(lengths, seed=0))
+    assert storage.common_length() == common
+    storage.set(torch.arange(2), _ending_at([T, T], seed=1))  # rows 0 and 1 whole again
+    assert storage.common_length() == (T if lengths[2:] == [T, T] else None)

@@ -1,6 +1,7 @@
 """An episode replay buffer: a stock TorchRL buffer over ``[episode, t]`` rows, any sampler, HER."""
 from __future__ import annotations
 
+import time
 from typing import Literal
 
 import torch
@@ -58,7 +59,9 @@ class EpisodeReplayBuffer(TensorDictReplayBuffer):
     Another process may overwrite a shared episode storage's rows while this one draws. A draw during
     which a write ran (the storage's ``write_counts``) is drawn again: the priority, the valid length and
     the data of each drawn transition then come from the same write, and no padding step is returned
-    (a plain :class:`~torchrl.data.TensorDictReplayBuffer` over the storage does not draw again).
+    (a plain :class:`~torchrl.data.TensorDictReplayBuffer` over the storage does not draw again). If the
+    count shows one write running for ``write_timeout_s`` (30 s) of redraws, it raises a ``RuntimeError``: a
+    write that never ends is one whose process died.
 
     Args:
         **kwargs: the arguments of :class:`~torchrl.data.TensorDictReplayBuffer`, unchanged.
@@ -73,15 +76,30 @@ class EpisodeReplayBuffer(TensorDictReplayBuffer):
         torch.Size([8, 25])
     """
 
+    # A write takes milliseconds: an odd total that stays this long is a write whose process died. Bounded by time,
+    # not by a count of redraws, so that a writer that keeps writing (the total keeps changing) is never refused.
+    write_timeout_s: float = 30.0
+
     def _sample(self, batch_size: int) -> tuple[TensorDictBase, dict]:
+        running, since = None, 0.0
         while True:
             counts = getattr(self._storage, "write_counts", None)
             if counts is None:
                 return super()._sample(batch_size)
             writes = int(counts[-1])
             data, info = super()._sample(batch_size)
-            if writes % 2 == 0 and int(counts[-1]) == writes:
+            after = int(counts[-1])
+            if writes % 2 == 0 and after == writes:
                 return data, info
+            if after % 2 and after != running:  # a write runs: timed from its first sight
+                running, since = after, time.monotonic()
+            elif after % 2 and time.monotonic() - since > self.write_timeout_s:
+                raise RuntimeError(
+                    f"the storage's write count total stayed odd ({after}) for over {self.write_timeout_s} s of "
+                    "redraws: a write into it never finished, a writing process probably died mid-write, and the "
+                    "rows it wrote may be torn. The count stays so in this storage: to recover, build a new storage "
+                    "and buffer and load them from a checkpoint (load_state_dict), or refill them."
+                )
 
 
 def make_replay_buffer(

@@ -73,8 +73,11 @@ class _EpisodeRows:
     def common_length(self) -> int | None:
         """The valid length every row shares (the row length unless episodes end early), else ``None``."""
         self._read_lengths_if_unknown()
-        # A full pass only while some episode ends early: the usual fixed-length episodes cost one read.
-        return self._steps if int(self._short_rows) == 0 else common_length(self._lengths)
+        # A full pass only while every episode ends early: while some do and others not, none is common.
+        short = int(self._short_rows)
+        if short == 0:
+            return self._steps
+        return common_length(self._lengths) if short == self._lengths.numel() else None
 
     def _read_lengths_if_unknown(self) -> None:
         if self._lengths is None:  # first write, or restored from a checkpoint: read them from the flags once
@@ -199,6 +202,7 @@ class _EpisodeRows:
         super().load_state_dict(state_dict)
         self._lengths = None
         self._count_written(slice(0, -1))
+        self._build_loaded()
 
     def loads(self, path: Any) -> None:
         saved_shape = TensorDict.load_memmap(path).shape  # memory-mapped: reading the shape loads no data
@@ -207,6 +211,13 @@ class _EpisodeRows:
         super().loads(path)
         self._lengths = None
         self._count_written(slice(0, -1))
+        self._build_loaded()
+
+    def _build_loaded(self) -> None:
+        """Reads the loaded rows' lengths and write counts now, not at the first write or draw: a process the
+        storage is sent to before then shares them, where each would otherwise build copies of its own."""
+        if self.initialized:
+            self._read_lengths_if_unknown()
 
     def _count_written(self, rows: slice) -> None:
         """Counts one write of ``rows`` (all of them, on a load: a sampler that meets the storage again scores it)."""
@@ -301,6 +312,11 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         super().set(cursor, data, set_cursor=set_cursor)
         if isinstance(data, TensorDictBase):
             # Laid out once it holds data, not at the first draw: a process it is sent to writes into the same blocks.
+            self._layout()
+
+    def _build_loaded(self) -> None:
+        super()._build_loaded()
+        if self.initialized:  # the blocks too: laid out in one process only, the other would write elsewhere
             self._layout()
 
     def _store(self, cursor: Any, data: Any, set_cursor: bool) -> None:

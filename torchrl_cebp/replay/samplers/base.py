@@ -355,12 +355,13 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 "needs the storage: use it inside a replay buffer whose writer notifies it."
             )
         rows, counts = stored_rows(index), self._write_counts(storage)
+        # Restored: the rows as they are, but those just written; before counting this write into counts of its own.
+        if self._seen is None and self._tree is not None:
+            self._seen = counts.clone()
+            self._seen[rows] = self._seen[-1] = -1
         if counts is self._writes:
             counts[rows] += 1
             counts[-1] += 2
-        elif self._seen is None and self._tree is not None:  # restored: the rows as they are, but those just written
-            self._seen = counts.clone()
-            self._seen[rows] = self._seen[-1] = -1
         self._catch_up(storage, rows)
 
     def _write_counts(self, storage: Storage) -> torch.Tensor:
@@ -391,6 +392,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
             changed = written
         else:
             changed = (counts[:-1] != self._seen[:-1]).nonzero().squeeze(-1)
+        if not changed.numel():  # a write into none of these rows (another worker's): nothing to score
+            self._seen[-1] = writes
+            return
         now = counts.index_select(0, changed)
         self._score_rows(changed, storage)
         if int(self._write_counts(storage)[-1]) == writes:  # read again: a worker's counts are a copy

@@ -198,12 +198,13 @@ class WorkerRows(Storage):
         counts = getattr(self.storage, "write_counts", None)
         if counts is None:
             return None
-        source, writes, cached = self.__dict__.get("_counts", (None, None, None))
+        source, writes, rows, cached = self.__dict__.get("_counts", (None, None, None, None))
+        if source is not counts:  # which storage rows are this worker's: fixed with the storage's counts
+            rows = self.global_rows(torch.arange(self.rows_within(counts.numel() - 1)))
         if source is not counts or int(counts[-1]) != writes:
             writes = int(counts[-1])  # read first: a write after it renews the gathered rows at the next call
-            rows = self.global_rows(torch.arange(self.rows_within(counts.numel() - 1)))
             cached = torch.cat([counts.index_select(0, rows), torch.tensor([writes])])
-            self.__dict__["_counts"] = counts, writes, cached
+            self.__dict__["_counts"] = counts, writes, rows, cached
         return cached
 
 
