@@ -495,7 +495,9 @@ def test_an_episode_sampler_scores_what_a_collectors_processes_write(collector_c
     finally:
         collector.shutdown()
     drawn = rb.sample()
-    assert rb.write_count == 9 and rb.sampler.n_episodes == 4
+    # An async collector's workers may finish one more batch, and write it, before the shutdown reaches them.
+    assert rb.write_count == 9 if collector_class is MultiSyncCollector else rb.write_count >= 9
+    assert rb.sampler.n_episodes == 4
     new = TensorDictReplayBuffer(storage=rb.storage, sampler=CEBPSampler(), dim_extend=0, batch_size=64)
     new.sample()  # scores the rows as they are now
     torch.testing.assert_close(rb.sampler.state_dict()["priorities"], new.sampler.state_dict()["priorities"])
