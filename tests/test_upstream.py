@@ -138,3 +138,15 @@ def test_excluded_transitions_are_never_drawn():
     flat = rb.sample()["index"]
     flat = flat[:, 0] * T + flat[:, 1]
     assert (flat < 10).all()
+
+
+def test_a_round_robin_writers_position_reads_back_and_restores():
+    # RoundRobinWriter has no public cursor setter: a refused write must leave the writer where it was.
+    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10), batch_size=2)
+    before = _upstream.writer_position(rb.writer)
+    rb.extend(TensorDict({"x": torch.zeros(3)}, [3]))
+    assert [int(v) for v in _upstream.writer_position(rb.writer)] == [3, 3]
+    _upstream.restore_writer_position(rb.writer, before)
+    rb.extend(TensorDict({"x": torch.ones(2)}, [2]))
+    assert [int(v) for v in _upstream.writer_position(rb.writer)] == [2, 2]
+    assert rb.storage[0]["x"] == 1  # the next write went where the restored cursor pointed

@@ -199,5 +199,23 @@ def rewind_writers(storage: Storage, rows: torch.Tensor) -> None:
     for buffer in attached_buffers(storage):
         writer = buffer.writer
         if isinstance(writer, RoundRobinWriter):
-            writer._cursor = int(rows[0])
-            writer._write_count = writer._write_count - rows.numel()
+            restore_writer_position(writer, (int(rows[0]), writer_position(writer)[1] - rows.numel()))
+
+
+def writer_position(writer: RoundRobinWriter) -> tuple[Any, Any]:
+    """A round-robin writer's cursor and write count (no public getter), to restore after a refused write.
+
+    Args:
+        writer (RoundRobinWriter): the writer.
+    """
+    return writer._cursor, writer._write_count
+
+
+def restore_writer_position(writer: RoundRobinWriter, position: tuple[Any, Any]) -> None:
+    """Sets a round-robin writer's cursor and write count (no public setter), as :func:`writer_position` read them.
+
+    Args:
+        writer (RoundRobinWriter): the writer.
+        position (tuple): its cursor and write count.
+    """
+    writer._cursor, writer._write_count = position

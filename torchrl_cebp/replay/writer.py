@@ -84,11 +84,12 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
     def extend(self, data: TensorDictBase) -> torch.Tensor:
         # A refused batch changes nothing: neither the waiting frames nor the next row (the storage refuses a write
         # before storing any row, after TorchRL's writer has moved its cursor).
-        partial, cursor, write_count = dict(self._partial), self._cursor, self._write_count
+        partial, position = dict(self._partial), _upstream.writer_position(self)
         try:
             return self._extend(data)
         except Exception:
-            self._partial, self._cursor, self._write_count = partial, cursor, write_count
+            self._partial = partial
+            _upstream.restore_writer_position(self, position)
             raise
 
     def _extend(self, data: TensorDictBase) -> torch.Tensor:
@@ -200,7 +201,7 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
 
     def __repr__(self) -> str:
         return (
-            f"EpisodeWriter(max_episode_steps={self.max_episode_steps}, cursor={int(self._cursor)}, "
+            f"EpisodeWriter(max_episode_steps={self.max_episode_steps}, cursor={int(_upstream.writer_position(self)[0])}, "
             f"partial_episodes={len(self._partial)})"
         )
 
