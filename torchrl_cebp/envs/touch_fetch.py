@@ -250,15 +250,9 @@ class TouchFetchPushEnv(_TouchFetchMixin, MujocoFetchPushEnv):
     :func:`make_touch_fetch` builds one by task name.
 
     Args:
-        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
-        control (str, optional): ``"mocap"`` (gymnasium-robotics' Fetch) or ``"joint"`` (CPER's
-            joint-controlled Fetch). Defaults to ``"mocap"``.
-        touch_ignores_table (bool, optional): puts the pads on sensor bodies that never feel the table.
-            Defaults to ``False``.
-        touch_in_observation (bool, optional): appends the step's touch and its running episode sum to the
-            observation. Defaults to ``False``.
-        max_episode_steps (int, optional): the episode length. Defaults to ``None``: the goal space's.
-        **kwargs: forwarded to the gymnasium-robotics env (``render_mode``, ``width``, ``height``, ...).
+        **kwargs: the arguments of :class:`TouchFetchPickAndPlaceEnv` (``goal_space``, ``control``,
+            ``touch_ignores_table``, ``touch_in_observation``, ``max_episode_steps``, and the gymnasium-robotics
+            env's), with the same defaults.
 
     Raises:
         ValueError: an unknown goal space or control.
@@ -279,15 +273,9 @@ class TouchFetchSlideEnv(_TouchFetchMixin, MujocoFetchSlideEnv):
     :func:`make_touch_fetch` builds one by task name.
 
     Args:
-        goal_space (str, optional): ``"standard"`` or ``"extended"``. Defaults to ``"standard"``.
-        control (str, optional): ``"mocap"`` (gymnasium-robotics' Fetch) or ``"joint"`` (CPER's
-            joint-controlled Fetch). Defaults to ``"mocap"``.
-        touch_ignores_table (bool, optional): puts the pads on sensor bodies that never feel the table.
-            Defaults to ``False``.
-        touch_in_observation (bool, optional): appends the step's touch and its running episode sum to the
-            observation. Defaults to ``False``.
-        max_episode_steps (int, optional): the episode length. Defaults to ``None``: the goal space's.
-        **kwargs: forwarded to the gymnasium-robotics env (``render_mode``, ``width``, ``height``, ...).
+        **kwargs: the arguments of :class:`TouchFetchPickAndPlaceEnv` (``goal_space``, ``control``,
+            ``touch_ignores_table``, ``touch_in_observation``, ``max_episode_steps``, and the gymnasium-robotics
+            env's), with the same defaults.
 
     Raises:
         ValueError: an unknown goal space or control.
