@@ -5,12 +5,12 @@ Each test fails, by name, if an upgrade moves or changes one of them.
 import numpy as np
 import torch
 from tensordict import TensorDict
-from torchrl.data import LazyTensorStorage, PrioritizedSampler, TensorDictReplayBuffer
+from torchrl.data import LazyTensorStorage, PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
 
 from tests.replay.conftest import T, make_episodes
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay import EpisodeStorage
-from torchrl_cebp.replay.samplers import UniformEpisodeSampler
+from torchrl_cebp.replay.samplers import UniformEpisodeSampler, WorkerLayout, WorkerRows
 
 
 def test_the_buffer_generator_reaches_the_storage():
@@ -35,6 +35,17 @@ def test_the_buffer_generator_reaches_the_sampler_and_none_means_the_global_rng(
     assert _upstream.sampler_generator(sampler) is other
     TensorDictReplayBuffer(storage=EpisodeStorage(10 * T), sampler=sampler, dim_extend=0, batch_size=4)
     assert _upstream.sampler_generator(sampler) is None  # a buffer without a generator clears it
+
+
+def test_torchrls_random_sampler_draws_a_storage_view_with_the_buffers_generator():
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(4 * T), dim_extend=0, batch_size=4)
+    rb.extend(make_episodes(4))
+    view = WorkerRows(rb.storage, worker=1, layout=WorkerLayout(workers=2))  # an _upstream.StorageView: 2 rows
+    rb.set_rng(torch.Generator().manual_seed(0))
+    rows, steps = RandomSampler().sample(view, 100)[0]
+    generator = torch.Generator().manual_seed(0)
+    assert torch.equal(rows, torch.randint(2, (100,), generator=generator))
+    assert torch.equal(steps, torch.randint(T, (100,), generator=generator))
 
 
 def test_the_storage_state_keeps_the_stored_tensordict_under_its_key():
@@ -150,3 +161,34 @@ def test_a_round_robin_writers_position_reads_back_and_restores():
     rb.extend(TensorDict({"x": torch.ones(2)}, [2]))
     assert [int(v) for v in _upstream.writer_position(rb.writer)] == [2, 2]
     assert rb.storage[0]["x"] == 1  # the next write went where the restored cursor pointed
+
+
+def test_a_recorded_write_leaves_the_storage_as_torchrls_own_write_does():
+    written, recorded = LazyTensorStorage(8 * T, ndim=2), LazyTensorStorage(8 * T, ndim=2)
+    first = TensorDict({"x": torch.zeros(2, T)}, [2, T])
+    for storage in (written, recorded):
+        storage.set(torch.arange(2), first)
+    more, cursor = TensorDict({"x": torch.ones(3, T)}, [3, T]), torch.arange(2, 5)
+    written.set(cursor, more)
+    _upstream.record_write(recorded, cursor, more, set_cursor=True)
+    assert len(recorded) == len(written) == 5 * T
+    assert recorded.shape == written.shape
+    assert int(recorded._last_cursor[-1]) == int(written._last_cursor[-1]) == 4
+    assert recorded._mutation_revision == written._mutation_revision
+
+
+def test_every_draw_of_a_buffer_goes_through_its_sample_hook():
+    # EpisodeReplayBuffer redraws inside TorchRL's private ``_sample``, which sample() and the prefetching threads
+    # call; nothing public wraps one draw.
+    class Counting(TensorDictReplayBuffer):
+        calls = 0
+
+        def _sample(self, batch_size):
+            Counting.calls += 1
+            return super()._sample(batch_size)
+
+    rb = Counting(storage=LazyTensorStorage(100), batch_size=4, prefetch=2)
+    rb.extend(TensorDict({"x": torch.arange(10.0)}, [10]))
+    for _ in range(3):
+        rb.sample()
+    assert Counting.calls >= 3

@@ -40,6 +40,21 @@ def sampler_generator(sampler: Sampler) -> torch.Generator | None:
     return getattr(sampler, "_rng", None)
 
 
+class StorageView:
+    """A storage view (of ``self.storage``, in its own ``shape``) that TorchRL's ``RandomSampler`` can draw from.
+
+    ``RandomSampler`` draws through ``storage._rand_given_ndim`` (TorchRL's base ``Storage`` has it for ``ndim=1``
+    only), with ``storage._rng``: ``ReplayBuffer.set_rng`` gives the generator to the whole storage, not to a view.
+    """
+
+    @property
+    def _rng(self) -> torch.Generator | None:
+        return buffer_generator(self.storage)
+
+    def _rand_given_ndim(self, batch_size: int) -> tuple[torch.Tensor, ...]:
+        return tuple(torch.randint(size, (batch_size,), generator=self._rng) for size in self.shape)
+
+
 # The key under which ``TensorStorage.state_dict`` keeps its stored tensordict's state; the episode storage
 # saves only the filled rows there, so that a checkpoint grows with the stored episodes.
 STORAGE_STATE_KEY = "_storage"
@@ -174,6 +189,19 @@ def replace_stored_tensordict(storage: TensorStorage, data: TensorDictBase) -> N
         data (TensorDictBase): same keys, shapes and dtypes as the storage's tensordict.
     """
     storage._storage = data
+
+
+def record_write(storage: TensorStorage, cursor: torch.Tensor, data: TensorDictBase, set_cursor: bool) -> None:
+    """Records a write of ``data`` at ``cursor`` as ``TensorStorage.set`` does: its last cursor, length and revision.
+
+    :class:`~torchrl_cebp.replay.EpisodeStorage` copies a write's rows itself, one block per dtype; TorchRL's own
+    ``set`` of no entry would record the same at five times the cost (a quarter of a write), and has no public
+    method that records without writing.
+    """
+    if set_cursor:
+        storage._set_last_cursor(cursor)
+        storage._get_new_len(data, cursor)
+    storage._bump_mutation_revision()
 
 
 def attached_buffers(storage: Storage) -> list[Any]:

@@ -44,6 +44,15 @@ def test_each_worker_gets_its_own_envs_episodes_and_draws_its_share_of_the_batch
     assert worker_of_row.tolist() == sum(([w] * 16 for w in range(WORKERS)), [])
 
 
+def test_the_layout_maps_rows_to_workers_and_back_and_counts_uneven_shares():
+    layout = WorkerLayout(workers=8, episodes_per_worker=2)
+    rows = torch.tensor([0, 3, 17])
+    workers = layout.worker_of(rows)
+    assert workers.tolist() == [0, 1, 0]
+    assert layout.global_rows(layout.local_rows(rows), workers).tolist() == [0, 3, 17]
+    assert [layout.rows_of_worker(14286, w) for w in (0, 7)] == [1786, 1784]  # 70-step Slide's rows: uneven
+
+
 def test_worker_rows_read_only_that_workers_episodes():
     storage = EpisodeStorage(4 * CYCLE * T)
     data = cycles(2)

@@ -23,24 +23,17 @@ def episode_storage(
     scratch_dir: str | None = None,
     device: torch.device | str = "cpu",
 ) -> EpisodeStorage | EpisodeMemmapStorage:
-    """An episode storage by name: ``"tensor"`` (in memory) or ``"memmap"`` (on disk).
+    """An empty episode storage by ``kind``: ``"tensor"`` (in memory) or ``"memmap"`` (on disk, in ``scratch_dir``).
 
     Args:
-        capacity (int, optional): the storage size in transitions: with 50-step episodes the default
-            1e6 is 20,000 episode rows. Defaults to ``1_000_000``.
+        capacity (int, optional): the storage size in transitions (see :func:`~torchrl_cebp.replay.episode_rows`).
+            Defaults to ``1_000_000``.
 
     Keyword Args:
-        kind (str, optional): ``"tensor"`` (in memory) or ``"memmap"`` (on disk). Defaults to ``"tensor"``.
+        kind (str, optional): ``"tensor"`` or ``"memmap"``. Defaults to ``"tensor"``.
         scratch_dir (str, optional): the folder of a ``"memmap"`` storage's files. Defaults to ``None``
-            (see :class:`~torchrl_cebp.replay.storage.EpisodeMemmapStorage`).
+            (temporary files).
         device (torch.device or str, optional): where the storage keeps its data. Defaults to ``"cpu"``.
-
-    Returns:
-        an empty :class:`~torchrl_cebp.replay.storage.EpisodeStorage` or
-        :class:`~torchrl_cebp.replay.storage.EpisodeMemmapStorage`.
-
-    Raises:
-        ValueError: if ``kind`` is neither ``"tensor"`` nor ``"memmap"``.
 
     Examples:
         >>> episode_storage(1000).ndim
@@ -81,6 +74,7 @@ class EpisodeReplayBuffer(TensorDictReplayBuffer):
     write_timeout_s: float = 30.0
 
     def _sample(self, batch_size: int) -> tuple[TensorDictBase, dict]:
+        # TorchRL's private hook, the one place that sees a whole draw, prefetched or not (tests/test_upstream.py).
         running, since = None, 0.0
         while True:
             counts = getattr(self._storage, "write_counts", None)
@@ -118,45 +112,31 @@ def make_replay_buffer(
     pin_memory: bool = False,
     shared: bool = False,
 ) -> EpisodeReplayBuffer:
-    """An :class:`EpisodeReplayBuffer` over an episode storage, a sampler (uniform HER by default) and HER.
+    """An :class:`EpisodeReplayBuffer` over an episode storage, a sampler and HER.
 
-    ``rb.extend(episodes)`` takes a tensordict of shape ``[n_episodes, T]`` (any collector batch
-    with ``writer=EpisodeWriter(T)``);
-    ``rb.sample()`` returns ``[batch_size]`` transitions with relabelled goals
-    and rewards (relabelled before ``transform`` runs), ``"index"`` (``[B, 2]``:
-    episode row, step) and, for samplers with importance-sampling weights,
-    ``"priority_weight"``. With a :class:`~torchrl_cebp.replay.samplers.PERSampler` (or a per-worker sampler of
-    them), ``rb.update_tensordict_priority(batch)`` feeds ``batch["td_error"]`` back.
+    ``rb.extend(episodes)`` takes ``[n_episodes, T]`` rows (a collector's frames with
+    ``writer=EpisodeWriter(T)``); ``rb.sample()`` returns ``[batch_size]`` relabelled transitions with their
+    ``"index"`` (``[B, 2]``: row, step) and, for samplers with importance-sampling weights, ``"priority_weight"``.
+    With PER, ``rb.update_tensordict_priority(batch)`` feeds ``batch["td_error"]`` back.
 
     Args:
-        sampler (Sampler or None): the sampler of episode rows and steps; ``None`` draws uniformly
-            (:class:`~torchrl_cebp.replay.samplers.UniformEpisodeSampler`).
+        sampler (Sampler or None): draws episode rows and steps; ``None`` draws uniformly.
         her (HindsightRelabel): relabels the goals and rewards of each drawn batch.
 
     Keyword Args:
-        capacity (int, optional): the storage size in transitions; a
-            :class:`~torchrl_cebp.replay.samplers.PERSampler` must have the same ``max_size``.
+        capacity (int, optional): the storage size in transitions; a PERSampler's ``max_size`` must equal it.
             Defaults to ``1_000_000``.
         batch_size (int, optional): transitions per ``rb.sample()``. Defaults to ``256``.
-        storage (str, optional): the storage kind, ``"tensor"`` or ``"memmap"`` (see :func:`episode_storage`).
-            Defaults to ``"tensor"``.
+        storage (str, optional): ``"tensor"`` or ``"memmap"`` (see :func:`episode_storage`). Defaults to ``"tensor"``.
         scratch_dir (str, optional): the folder of a ``"memmap"`` storage's files. Defaults to ``None``.
         device (torch.device or str, optional): where the storage keeps its data. Defaults to ``"cpu"``.
         transform (Transform, optional): applied to each relabelled batch. Defaults to ``None``.
-        generator (torch.Generator, optional): drives every random draw of a sample: the sampler's and HER's.
+        generator (torch.Generator, optional): drives every random draw of a sample, the sampler's and HER's.
             Defaults to ``None`` (torch's default generator).
-        writer (Writer, optional): as for :class:`~torchrl.data.ReplayBuffer`. Defaults to ``None``.
-        prefetch (int, optional): as for :class:`~torchrl.data.ReplayBuffer`; HER keeps each prefetching
-            thread's draw apart. Defaults to ``None``.
-        pin_memory (bool, optional): as for :class:`~torchrl.data.ReplayBuffer`. Defaults to ``False``.
-        shared (bool, optional): as for :class:`~torchrl.data.ReplayBuffer`. Defaults to ``False``.
-
-    Returns:
-        an empty :class:`EpisodeReplayBuffer`.
+        writer, prefetch, pin_memory, shared: as for :class:`~torchrl.data.ReplayBuffer`.
 
     Raises:
-        ValueError: if a :class:`~torchrl_cebp.replay.samplers.PERSampler`'s ``max_size`` is not ``capacity``,
-            or ``storage`` is not a known kind.
+        ValueError: if a PERSampler's ``max_size`` is not ``capacity``, or ``storage`` is not a known kind.
 
     Examples:
         >>> import torch

@@ -42,14 +42,11 @@ def episode_rows(capacity: int, episode_steps: int) -> int:
 
 
 class _EpisodeRows:
-    """Writes must be whole episodes of one fixed length (the storage's second dimension).
+    """Writes must be whole episodes of one fixed length; each row's valid length and write count are kept.
 
-    Each row's valid length (up to its first ``end_key`` flag) is kept on write, so that HER reads it per
-    draw instead of scanning the flags. The lengths and :attr:`write_counts` (each row's write count, then
-    a count of write starts and ends, odd while a write runs) are memory every process holding the storage
-    shares (torch shares every CPU tensor it sends to a spawned process). A reader that finds the last
-    count even and unchanged across its reads read one version of each row (writes themselves take turns:
-    TorchRL's cursor is one per buffer, or shared with ``shared=True``, which also locks them).
+    The lengths and :attr:`write_counts` are memory every process holding the storage shares (torch shares
+    every CPU tensor it sends to a spawned process). A reader that finds the last count even and unchanged
+    across its reads read one version of each row: writes take turns (TorchRL's cursor is one per buffer).
     """
 
     end_key: NestedKey = ("next", "done")
@@ -98,15 +95,17 @@ class _EpisodeRows:
 
     def _set_lengths(self, rows: torch.Tensor, lengths: torch.Tensor) -> None:
         row_length = self._steps
+        if not int(self._short_rows) and bool((lengths == row_length).all()):
+            return  # whole episodes over whole ones: nothing changes (the usual write)
         now, before = lengths < row_length, self._lengths[rows] < row_length
         self._short_rows += torch.count_nonzero(now) - torch.count_nonzero(before)
         self._lengths[rows] = lengths
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if not isinstance(data, TensorDictBase):
-            return self._store(cursor, data, set_cursor)
+            return self._store(cursor, data, set_cursor, exact=False)
         try:  # every check before any row changes: a refused write stores nothing
-            self._check_rows(data)
+            exact = self._check_rows(data)
             for buffer in _upstream.attached_buffers(self):
                 check = getattr(buffer.sampler, "check_episodes", None)
                 if check is not None:
@@ -121,31 +120,31 @@ class _EpisodeRows:
                 torch.arange(self.max_size // self._steps)[cursor].reshape(-1))
             self._write_counts[-1] += 1  # odd while the rows change
         try:
-            self._store(cursor, data, set_cursor)
+            self._store(cursor, data, set_cursor, exact=exact)
             if known:
                 self._set_lengths(rows, episode_lengths(data, self.end_key))
         finally:
             if known:
-                self._write_counts[rows.unique()] += 1
+                self._write_counts[rows] += 1  # a row written twice in one write counts once: still a change
                 self._write_counts[-1] += 1
         if not known:  # the first write: every filled row from its flags, each counted written
             self._read_lengths_if_unknown()
             self._count_written(slice(0, self.shape[0]))
 
-    def _store(self, cursor: Any, data: Any, set_cursor: bool) -> None:
-        """Writes ``data`` at ``cursor`` (the TorchRL storage's own write)."""
+    def _store(self, cursor: Any, data: Any, set_cursor: bool, *, exact: bool) -> None:
+        """Writes ``data`` at ``cursor`` (``exact``: it holds the stored entries, no more) as TorchRL's storage does."""
         super().set(cursor, data, set_cursor=set_cursor)
 
-    def _check_rows(self, data: TensorDictBase) -> None:
-        """Refuses a write whose rows cannot each be one episode of the storage's length."""
+    def _check_rows(self, data: TensorDictBase) -> bool:
+        """Refuses a write whose rows cannot each be one episode of the storage's length; returns whether it holds
+        exactly the stored entries."""
         if data.ndim != 2:
             raise ValueError(
                 f"episode storages take whole episodes shaped [n_episodes, T], got batch shape {list(data.shape)}: "
                 f"{ASSEMBLE_FRAMES}"
             )
         require_time_at(data, 1, [buffer.dim_extend for buffer in _upstream.attached_buffers(self)])
-        if self.initialized:
-            self._check_keys(data)
+        exact = self.initialized and self._check_keys(data)
         ends = end_flags(data, self.end_key)
         counts = None if ends is None else ends.sum(-1)
         if counts is not None and bool((counts > 1).any()):
@@ -158,22 +157,29 @@ class _EpisodeRows:
             raise ValueError(
                 f"episodes of {data.shape[1]} steps cannot go into a storage of {self._steps}-step episodes"
             )
+        return exact
 
-    def _check_keys(self, data: TensorDictBase) -> None:
-        """Refuses a write that lacks a stored entry: its rows would keep the entry's old memory."""
+    def _check_keys(self, data: TensorDictBase) -> bool:
+        """Refuses a write that lacks a stored entry (its rows would keep the entry's old memory); returns whether
+        it holds exactly the stored entries."""
         stored = _upstream.stored_tensordict(self)
         if self._stored_keys is None or self._stored_keys[0] is not stored:
             self._stored_keys = stored, _names_by_node(stored.keys(True, True))
         # Each node's names (no nested iteration: it costs more than the write); "index": TorchRL's writers add the
         # index they write to, to some writes only.
-        if all(names - {"index"} <= _names_at(data, path) for path, names in self._stored_keys[1].items()):
-            return
+        exact = complete = True
+        for path, names in self._stored_keys[1].items():
+            present = _names_at(data, path)
+            exact, complete = exact and present == names, complete and names - {"index"} <= present
+        if complete:
+            return exact
         stored_keys = [key for key in stored.keys(True, True) if key != "index"]
         missing = [key for key in stored_keys if data.get(key, None) is None]
         if missing:
             raise KeyError(
                 f"a write into an episode storage must hold every stored entry: it lacks {sorted(map(str, missing))}"
             )
+        return False
 
     def state_dict(self) -> dict[str, Any]:
         """The storage's state with its filled rows only, so that a checkpoint grows with the stored episodes."""
@@ -200,22 +206,20 @@ class _EpisodeRows:
                 # the capacity's memory); ``full`` is this storage's own, so nothing else holds it.
                 _upstream.replace_stored_tensordict(self, TensorDict())
         super().load_state_dict(state_dict)
-        self._lengths = None
-        self._count_written(slice(0, -1))
-        self._build_loaded()
+        self._after_load()
 
     def loads(self, path: Any) -> None:
         saved_shape = TensorDict.load_memmap(path).shape  # memory-mapped: reading the shape loads no data
         if len(saved_shape) >= 2:
             self._adopt_saved_rows(saved_shape[0], saved_shape[1])
         super().loads(path)
+        self._after_load()
+
+    def _after_load(self) -> None:
+        """Counts every row written once, so that a sampler meeting the storage again rescores it; reads the
+        lengths now, not at the first write or draw, so that a process the storage is sent to shares them."""
         self._lengths = None
         self._count_written(slice(0, -1))
-        self._build_loaded()
-
-    def _build_loaded(self) -> None:
-        """Reads the loaded rows' lengths and write counts now, not at the first write or draw: a process the
-        storage is sent to before then shares them, where each would otherwise build copies of its own."""
         if self.initialized:
             self._read_lengths_if_unknown()
 
@@ -264,18 +268,12 @@ def _is_pair_index(index: Any) -> bool:
 
 
 class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
-    """In-memory TorchRL storage of episodes as ``[episode, t]`` rows.
+    """In-memory TorchRL storage of episodes as ``[episode, t]`` rows: a ``LazyTensorStorage(ndim=2)`` for episodes.
 
-    A :class:`~torchrl.data.LazyTensorStorage` with ``ndim=2`` whose writes
-    must be whole episodes of one fixed length (:class:`~torchrl_cebp.replay.EpisodeWriter`
-    assembles them from a collector's frames); an episode may end before its
-    row does, at its first ``end_key`` flag (:meth:`valid_lengths`). Its entries are laid out
-    transition-major: all entries of one dtype share one ``[rows, T, features]``
-    block, and each entry is a view into it. Drawing ``(episode, step)`` pairs
-    then reads one contiguous run of memory per transition and dtype instead of
-    one cache miss per entry, which is what makes a batch of 256 from 1M
-    transitions cheap. With a round-robin writer (the default of every TorchRL
-    buffer) the oldest episode is overwritten first.
+    Its writes must be whole episodes of one length (:class:`~torchrl_cebp.replay.EpisodeWriter` assembles
+    them from a collector's frames); an episode may end before its row does, at its first ``end_key`` flag
+    (:meth:`valid_lengths`). All entries of one dtype share one ``[rows, T, features]`` block, so a draw of
+    ``(episode, step)`` pairs reads one run of memory per transition and dtype, not one cache miss per entry.
 
     Args:
         capacity (int, optional): the storage size in transitions (see :func:`episode_rows` for the rows it
@@ -314,26 +312,22 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             # Laid out once it holds data, not at the first draw: a process it is sent to writes into the same blocks.
             self._layout()
 
-    def _build_loaded(self) -> None:
-        super()._build_loaded()
+    def _after_load(self) -> None:
+        super()._after_load()
         if self.initialized:  # the blocks too: laid out in one process only, the other would write elsewhere
             self._layout()
 
-    def _store(self, cursor: Any, data: Any, set_cursor: bool) -> None:
+    def _store(self, cursor: Any, data: Any, set_cursor: bool, *, exact: bool) -> None:
         # Whole rows of the stored entries, no more and no fewer: one copy per dtype block, where TorchRL's write
-        # copies each entry apart (the most of a write's time). Its own write, of no entry, keeps its length,
-        # cursor and revision.
-        fast = self.initialized and isinstance(cursor, torch.Tensor) and cursor.ndim == 1 and type(data) is TensorDict
-        if fast:
-            self._layout()
-            fast = all(_names_at(data, path) == names for path, names in self._names_by_node.items())
-        if not fast:
-            return super()._store(cursor, data, set_cursor)
+        # copies each entry apart (the most of a write's time).
+        if not (exact and isinstance(cursor, torch.Tensor) and cursor.ndim == 1 and type(data) is TensorDict):
+            return super()._store(cursor, data, set_cursor, exact=exact)
+        self._layout()
         rows = []
         for block, keys in self._row_blocks:
             parts = [data.get(key).reshape(*data.shape, -1) for key in keys]
             rows.append((block, parts[0] if len(parts) == 1 else torch.cat(parts, dim=-1)))
-        super()._store(cursor, TensorDict(batch_size=data.shape, device=self.device), set_cursor)
+        _upstream.record_write(self, cursor, data, set_cursor)
         for block, values in rows:
             block.index_copy_(0, cursor.to(block.device), values.to(block.device, block.dtype))
 
@@ -343,7 +337,7 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             # A copy (deepcopy, pickle) copies each entry apart from the blocks it was a view of: the copy lays
             # its entries out again. Sent to a spawned process, both stay views of the same shared memory.
             state = {**state, "_layout_source": None}
-            for cache in ("_blocks", "_row_blocks", "_names_by_node", "_plan", "_n_nodes", "_row_length"):
+            for cache in ("_blocks", "_row_blocks", "_plan", "_n_nodes", "_row_length"):
                 state.pop(cache, None)
         return state
 
@@ -375,7 +369,6 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
                 for dtype, block in blocks.items()
             ]
             self._row_blocks = [(block, [f.key for f in fields if f.dtype == dtype]) for dtype, block in blocks.items()]
-            self._names_by_node = _names_by_node(field.key for field in fields)
             self._plan, self._n_nodes = _read_plan(fields)
             self._row_length = steps  # storage.shape is recomputed on every read (~10% of a draw of 256)
         return self._blocks, self._plan, self._n_nodes
@@ -394,8 +387,8 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             first, stop, _ = index.indices(self.shape[0])
             stop = max(stop, first)
             steps = self._row_length
-            columns = [c.unflatten(0, (stop - first, steps))
-                       for block, widths in blocks for c in block[first * steps : stop * steps].split(widths, dim=1)]
+            columns = [c for block, widths in blocks
+                       for c in block[first * steps : stop * steps].unflatten(0, (stop - first, steps)).split(widths, -1)]
             return self._assembled(columns, plan, n_nodes, torch.Size([stop - first, steps]))
         return super().get(index)
 
@@ -432,12 +425,8 @@ def _reshaped(columns: torch.Tensor, shape: torch.Size) -> torch.Tensor:
 
 
 def _read_plan(fields: list[_Field]) -> tuple[list[tuple], int]:
-    """How :meth:`EpisodeStorage.get` nests the gathered columns, in the stored key order.
-
-    Returns ``(node, name, child, column, shape)`` steps, with ``child`` the index of a sub-node for
-    a nested key's parent and ``column`` the index of a leaf's column among the dtype blocks'
-    split columns (``shape`` ``None`` where the column is the entry as is), and the node count.
-    """
+    """How :meth:`EpisodeStorage.get` nests the gathered columns: ``(node, name, child, column, shape)`` steps
+    (``child``: a sub-node's index; ``column``: a leaf's among the blocks' split columns), and the node count."""
     by_dtype: dict[torch.dtype, list[_Field]] = {}
     for field in fields:
         by_dtype.setdefault(field.dtype, []).append(field)

@@ -27,69 +27,26 @@ from torchrl_cebp.replay.episodes import episode_lengths, shared_length, stored_
 FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
 # TorchRL's samplers' words for it, so that code catching theirs catches ours.
 EMPTY_STORAGE_ERROR = "Cannot sample from an empty storage."
-
-
 # What dumps() writes into its folder: the state_dict, which torch.load(weights_only=True) reads back.
 SAMPLER_STATE_FILE = "sampler_state.pt"
 
 
 def dump_state(sampler: Sampler, path: str | Path) -> None:
-    """The ``dumps`` of this package's samplers: writes ``sampler.state_dict()`` into a folder.
-
-    PER's is TorchRL's own format instead, which TorchRL's :class:`~torchrl.data.PrioritizedSampler` reads too.
-
-    Args:
-        sampler (Sampler): the sampler whose state is written.
-        path (str or Path): the folder to write into; it is created if missing.
-
-    Examples:
-        >>> import tempfile
-        >>> from torchrl_cebp.replay.samplers import UniformEpisodeSampler
-        >>> folder, restored = tempfile.mkdtemp(), UniformEpisodeSampler()
-        >>> dump_state(UniformEpisodeSampler(), folder)
-        >>> load_state(restored, folder)
-        >>> restored.n_episodes
-        0
-    """
+    """The ``dumps`` of this package's samplers: ``sampler.state_dict()`` into a folder (PER keeps TorchRL's)."""
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     torch.save(sampler.state_dict(), path / SAMPLER_STATE_FILE)
 
 
 def load_state(sampler: Sampler, path: str | Path) -> None:
-    """The ``loads`` of this package's samplers: loads what :func:`dump_state` wrote.
-
-    Args:
-        sampler (Sampler): the sampler that loads the state.
-        path (str or Path): the folder :func:`dump_state` wrote into.
-    """
+    """The ``loads`` of this package's samplers: what :func:`dump_state` wrote."""
     sampler.load_state_dict(torch.load(Path(path) / SAMPLER_STATE_FILE, weights_only=True))
 
 
 def require_key(
     episodes: TensorDictBase, key: NestedKey, trailing_shape: tuple[int | None, ...]
 ) -> torch.Tensor:
-    """Returns ``episodes[key]`` after checking it is there with shape ``[n, T, *trailing_shape]``.
-
-    Args:
-        episodes (TensorDictBase): the ``[n, T]`` episodes.
-        key (NestedKey): the entry to read.
-        trailing_shape (tuple of int or None): the shape of one step's entry; ``None`` accepts any size
-            in that dimension.
-
-    Returns:
-        the ``[n, T, *trailing_shape]`` tensor.
-
-    Raises:
-        KeyError: if ``episodes`` has no ``key``.
-        ValueError: if the entry has another shape.
-
-    Examples:
-        >>> from tensordict import TensorDict
-        >>> td = TensorDict({"next": {"touch": torch.zeros(2, 50, 2)}}, [2, 50])
-        >>> require_key(td, ("next", "touch"), (2,)).shape
-        torch.Size([2, 50, 2])
-    """
+    """``episodes[key]``, refused unless it is there with shape ``[n, T, *trailing_shape]`` (``None``: any size)."""
     value = episodes.get(key, None)
     if value is None:
         raise KeyError(
@@ -112,24 +69,9 @@ def _shape_text(trailing_shape: tuple[int | None, ...]) -> str:
 
 def checked(owner: str, name: str, value: float, *, minimum: float = 0.0, exclusive: bool = False,
             maximum: float = math.inf) -> float:
-    """Returns ``value`` as a float, after checking it lies in the allowed range.
-
-    Args:
-        owner (str): who checks, named in the error.
-        name (str): the parameter checked, named in the error.
-        value (float): the value to check.
-
-    Keyword Args:
-        minimum (float, optional): the lower bound. Defaults to ``0.0``.
-        exclusive (bool, optional): whether ``minimum`` itself is refused. Defaults to ``False``.
-        maximum (float, optional): the upper bound, included. Defaults to ``math.inf``.
-
-    Raises:
-        ValueError: if ``value`` lies outside the range; the message names it and the range.
+    """``value`` as a float, refused with a message naming it and the range unless it lies in the range.
 
     Examples:
-        >>> checked("CEBPSampler", "beta", 1)
-        1.0
         >>> checked("CEBPSampler", "beta", -1)
         Traceback (most recent call last):
         ...
@@ -143,20 +85,7 @@ def checked(owner: str, name: str, value: float, *, minimum: float = 0.0, exclus
 
 
 def batch_normalised_weights(probabilities: torch.Tensor, n_episodes: int, beta: float) -> torch.Tensor:
-    """Importance-sampling weights ``(N p)^-beta`` of drawn episodes, over the batch's largest (PER's form).
-
-    Args:
-        probabilities (torch.Tensor): ``p``, each drawn episode's draw probability.
-        n_episodes (int): ``N``, the number of stored episodes.
-        beta (float): the exponent; 0 weighs every draw alike.
-
-    Returns:
-        the weights, shaped as ``probabilities``, the largest being 1.
-
-    Examples:
-        >>> batch_normalised_weights(torch.tensor([0.5, 0.25]), 2, 1.0).tolist()
-        [0.5, 1.0]
-    """
+    """Importance-sampling weights ``(N p)^-beta`` of the drawn episodes over the batch's largest (PER's form)."""
     weights = (n_episodes * probabilities) ** (-beta)
     return weights / weights.max()
 
@@ -164,45 +93,14 @@ def batch_normalised_weights(probabilities: torch.Tensor, n_episodes: int, beta:
 def episode_positions(
     episodes: TensorDictBase, position_key: NestedKey, next_position_key: NestedKey
 ) -> torch.Tensor:
-    """Stacks the position before step 0 with every next position.
-
-    Args:
-        episodes (TensorDictBase): the ``[n, T]`` episodes.
-        position_key (NestedKey): the ``[n, T, 3]`` position before each step.
-        next_position_key (NestedKey): the ``[n, T, 3]`` position after each step.
-
-    Returns:
-        a float64 ``[n, T + 1, 3]`` tensor.
-
-    Raises:
-        KeyError: if an entry is missing (see :func:`require_key`).
-        ValueError: if an entry is not ``[n, T, 3]``.
-
-    Examples:
-        >>> from tensordict import TensorDict
-        >>> td = TensorDict({"achieved_goal": torch.zeros(1, 4, 3),
-        ...                  "next": {"achieved_goal": torch.ones(1, 4, 3)}}, [1, 4])
-        >>> episode_positions(td, "achieved_goal", ("next", "achieved_goal")).shape
-        torch.Size([1, 5, 3])
-    """
+    """The float64 ``[n, T + 1, 3]`` positions: the one before step 0, then each next position."""
     first = require_key(episodes, position_key, (3,))[:, :1]
     following = require_key(episodes, next_position_key, (3,))
     return torch.cat([first, following], dim=1).double()
 
 
 def stored_rows(index: torch.Tensor) -> torch.Tensor:
-    """Episode rows touched by a write, in order.
-
-    Args:
-        index (torch.Tensor): the ``[n * T, 2]`` index a buffer reports for a write (or a 1-d index of rows).
-
-    Returns:
-        the sorted unique rows.
-
-    Examples:
-        >>> stored_rows(torch.tensor([[3, 0], [3, 1], [0, 0], [0, 1]])).tolist()
-        [0, 3]
-    """
+    """The sorted episode rows of a write's ``[n * T, 2]`` index (or of a 1-d index of rows)."""
     index = torch.as_tensor(index)
     rows = (index[..., 0] if index.ndim > 1 else index).reshape(-1)
     # A buffer's index lists each row's steps together: collapsing those runs first leaves one entry a row.
@@ -210,11 +108,7 @@ def stored_rows(index: torch.Tensor) -> torch.Tensor:
 
 
 def split_index(index: torch.Tensor | tuple) -> tuple[torch.Tensor, torch.Tensor]:
-    """Returns ``(rows, steps)`` from a sampled index.
-
-    Args:
-        index (torch.Tensor or tuple): a ``(rows, steps)`` tuple or a ``[B, 2]`` tensor.
-    """
+    """``(rows, steps)`` of a sampled index, a ``(rows, steps)`` tuple or a ``[B, 2]`` tensor."""
     if isinstance(index, tuple):
         return index[0], index[1]
     return index[..., 0], index[..., 1]
@@ -222,7 +116,7 @@ def split_index(index: torch.Tensor | tuple) -> tuple[torch.Tensor, torch.Tensor
 
 @runtime_checkable
 class EpisodeSampler(Protocol):
-    """What a sampler that draws whole episodes answers besides TorchRL's :class:`~torchrl.data.replay_buffers.Sampler`.
+    """What a sampler of whole episodes answers besides TorchRL's :class:`~torchrl.data.replay_buffers.Sampler`.
 
     Every :class:`EpisodePrioritySampler` is one, and so is a
     :class:`~torchrl_cebp.replay.samplers.PerWorkerSampler` of them. A trainer reads it to log the draw's spread
@@ -247,24 +141,18 @@ class EpisodeSampler(Protocol):
 
 
 class EpisodePrioritySampler(Sampler, abc.ABC):
-    """Base class: draws episode rows by a per-episode priority, then a step.
+    """Base class: draws an episode row by a per-episode priority, then a valid step of it.
 
-    Subclasses implement :meth:`episode_priority`, mapping the ``[n, T]``
-    tensordict of freshly written episodes and its ``[n, T]`` mask of valid
-    (non-padding) steps to ``n`` non-negative priorities, and may override
-    :meth:`step_weights` (non-uniform steps) and :meth:`importance_weights`. Works with a stock
-    :class:`~torchrl.data.TensorDictReplayBuffer` over
-    ``LazyTensorStorage(capacity_in_transitions, ndim=2)``: the buffer's
-    writer notifies the sampler through :meth:`mark_update` after each write.
-    One path scores: the rows whose write count changed since the sampler last
-    looked, at each write it is told of and at each draw, whichever process wrote
-    them (an episode storage's shared ``write_counts``; over another storage the
-    sampler counts the writes it is told of, in memory a spawned copy shares).
-    A sampler given a storage that already holds episodes scores them all when it
-    first meets it.
+    Subclasses implement :meth:`episode_priority`, and may override :meth:`step_weights` and
+    :meth:`importance_weights`. Priorities live in TorchRL's sum segment tree, so a draw costs
+    O(batch x log episodes). The sampler scores the rows whose write count changed since it last
+    looked, at each write its buffer tells it of and at each draw, whichever process wrote them
+    (an episode storage's shared ``write_counts``; over TorchRL's ``LazyTensorStorage(ndim=2)`` it
+    counts the writes it is told of itself).
 
     Args:
-        end_key (NestedKey): the flag that ends an episode before its row does.
+        end_key (NestedKey, optional): the flag that ends an episode before its row does.
+            Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
@@ -303,9 +191,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         """Per-step sampling weights ``[n, T]`` (0 on padding), or ``None`` for uniform valid steps."""
         return None
 
-    def importance_weights(
-        self, probabilities: torch.Tensor, n_episodes: int
-    ) -> torch.Tensor | None:
+    def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor | None:
         """IS weights of the drawn episodes, or ``None`` when the method uses none."""
         return None
 
@@ -314,19 +200,12 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         return {}
 
     def check_episodes(self, episodes: TensorDictBase) -> None:
-        """Refuses ``[n, T]`` episodes that lack an entry this sampler reads, naming it and its shape.
-
-        The episode storages call it before they store a write, so that a write this sampler cannot
-        score stores nothing.
-        """
+        """Refuses ``[n, T]`` episodes that lack an entry this sampler reads; episode storages ask before a write."""
         for key, shape in self.episode_keys().items():
             require_key(episodes, key, shape)
 
     def refit(self, storage: Storage) -> None:
-        """Re-ranks the stored episodes from the whole ``storage``; a trainer calls it once per epoch.
-
-        Priorities fixed at write time need nothing here; a density model (MEP) refits on it.
-        """
+        """Re-ranks the stored episodes from the whole ``storage`` once an epoch (MEP's density model)."""
 
     # ---- TorchRL sampler interface ----------------------------------------------
     @property
@@ -334,8 +213,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         """Number of episode rows written so far (at most the storage's rows)."""
         return self._n_stored
 
-    def _ensure_tree(self, storage: Storage) -> None:
-        # The storage's row count is fixed once it holds data: one tree for its lifetime.
+    def _make_tree(self, storage: Storage) -> None:
+        """The priorities' tree for the rows of a storage met for the first time (fixed once it holds data)."""
         n_rows = storage.max_size // storage.shape[1]
         if self._tree is None:
             self._tree = SumSegmentTreeFp64(n_rows)
@@ -346,19 +225,13 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                 f"or loaded from the state of one), but this storage has {n_rows}: use one sampler per buffer"
             )
 
-    def mark_update(
-        self, index: torch.Tensor | int, *, storage: Storage | None = None
-    ) -> None:
+    def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
         if storage is None:
             raise RuntimeError(
                 f"{type(self).__name__} computes priorities from the written episodes and "
                 "needs the storage: use it inside a replay buffer whose writer notifies it."
             )
         rows, counts = stored_rows(index), self._write_counts(storage)
-        # Restored: the rows as they are, but those just written; before counting this write into counts of its own.
-        if self._seen is None and self._tree is not None:
-            self._seen = counts.clone()
-            self._seen[rows] = self._seen[-1] = -1
         if counts is self._writes:
             counts[rows] += 1
             counts[-1] += 2
@@ -369,6 +242,11 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         counts = getattr(storage, "write_counts", None)
         if counts is not None:
             return counts
+        if getattr(storage, "ndim", 1) != 2:
+            raise ValueError(
+                f"{type(self).__name__} needs an episode storage with ndim=2 "
+                f"(rows = episodes, columns = steps), got ndim={getattr(storage, 'ndim', 1)}"
+            )
         n_rows = storage.max_size // storage.shape[1]
         if self._writes is None or self._writes.numel() != n_rows + 1:
             self._writes = torch.zeros(n_rows + 1, dtype=torch.long)
@@ -376,15 +254,19 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def _catch_up(self, storage: Storage, written: torch.Tensor | None = None) -> None:
         """Scores the rows whose write count changed since they were last scored: only the ``written`` rows when
-        theirs is the one write since, one read when there was none. While a write runs, or if one ran while
+        theirs is the one write since, none when there was none. While a write runs, or if one ran while
         scoring, the rows are scored at the next look."""
         if self._seen is None and not len(storage):
             return
         counts = self._write_counts(storage)
         if self._seen is None or self._seen.numel() != counts.numel():
+            # First meeting: every filled row is new. Restored from a state: the state holds all but the rows
+            # written since. Another storage is refused unless its rows are as many.
+            stale = slice(0, storage.shape[0]) if self._tree is None else written
+            self._make_tree(storage)
             self._seen = counts.clone()
-            if self._tree is None:  # first meeting: the rows it holds count as written now
-                self._seen[: storage.shape[0]] = self._seen[-1] = -1
+            if stale is not None:
+                self._seen[stale] = self._seen[-1] = -1
         writes = int(counts[-1])
         if writes == int(self._seen[-1]) or writes % 2:
             return
@@ -392,37 +274,25 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
             changed = written
         else:
             changed = (counts[:-1] != self._seen[:-1]).nonzero().squeeze(-1)
-        if not changed.numel():  # a write into none of these rows (another worker's): nothing to score
-            self._seen[-1] = writes
-            return
-        now = counts.index_select(0, changed)
-        self._score_rows(changed, storage)
-        if int(self._write_counts(storage)[-1]) == writes:  # read again: a worker's counts are a copy
+        if changed.numel():  # none: a write into other rows (another worker's)
+            now = counts.index_select(0, changed)
+            self._score_rows(changed, storage)
+            if int(self._write_counts(storage)[-1]) != writes:  # read again: a worker's counts are a copy
+                return
             self._seen[changed] = now
-            self._seen[-1] = writes
+        self._seen[-1] = writes
 
     def _score_rows(self, rows: torch.Tensor, storage: Storage) -> None:
-        if getattr(storage, "ndim", 1) != 2:
-            raise ValueError(
-                f"{type(self).__name__} needs an episode storage with ndim=2 "
-                f"(rows = episodes, columns = steps), got ndim={getattr(storage, 'ndim', 1)}"
-            )
         first, last = int(rows[0]), int(rows[-1])
         # A write is usually one run of consecutive rows: read it as a view, not a copy.
         episodes = storage.get(slice(first, last + 1)) if last - first + 1 == rows.numel() else storage.get(rows)
-        self._ensure_tree(storage)
         self.write_priorities(rows, episodes, stored_lengths(storage, rows, self.end_key))
 
     def write_priorities(
         self, rows: torch.Tensor, episodes: TensorDictBase, lengths: torch.Tensor | None = None
     ) -> None:
-        """Computes and stores the priorities of ``episodes`` written at ``rows``.
-
-        Args:
-            rows (torch.Tensor): where they are stored.
-            episodes (TensorDictBase): the ``[n, T]`` episodes.
-            lengths (torch.Tensor, optional): their valid lengths. Defaults to reading them from their flags.
-        """
+        """Scores the ``[n, T]`` ``episodes`` stored at ``rows`` (their valid ``lengths`` read from their flags if
+        not given)."""
         if lengths is None:
             lengths = episode_lengths(episodes, self.end_key)
         valid = valid_steps(lengths, episodes.shape[1])
@@ -508,8 +378,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._n_stored = int(state_dict["n_stored"])
         steps = state_dict.get("cumulative_step_weights")
         self._cumulative_step_weights = None if steps is None else steps.clone()
-        self._tree = SumSegmentTreeFp64(self._priorities.numel())
+        self._tree = None  # a state saved before any write: the tree is made for the storage it meets
         if self._priorities.numel():
+            self._tree = SumSegmentTreeFp64(self._priorities.numel())
             self._tree[torch.arange(self._priorities.numel())] = self._priorities
         self._seen = None  # the state matches the storage's rows as they are now
 

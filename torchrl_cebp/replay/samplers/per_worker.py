@@ -1,24 +1,7 @@
-"""Baselines' per-MPI-worker replay, emulated in one buffer: each worker's episodes, sampler and draw apart.
-
-In baselines' HER (OpenAI baselines' ``her``, which the paper's code extends) each of the ``W`` MPI
-workers owns a replay buffer of the episodes its own envs collected, computes priorities over it, draws its
-own batch and normalises its importance-sampling weights within it (by the batch's largest weight for CEBP, by the smallest priority in its
-own trees for PER); the workers' gradients are then summed. For uniform HER one merged buffer drawing
-``W x batch`` is the same distribution; for a prioritised sampler it is not (one merged batch puts its
-weight scale on its single least likely sample, and turns the weights on once ``W x 256`` episodes are
-stored in all rather than 256 per worker).
-
-Why not TorchRL's ``ReplayBufferEnsemble`` / ``SamplerEnsemble``: the ensemble keeps one buffer per
-member, and in TorchRL 0.14.1 its routed ``extend`` flattens the written data to single transitions
-(``data.reshape(-1)``), which an episode storage refuses; its reads go through ``StorageEnsemble``
-and a ``TensorDict`` index (``buffer_ids``, ``index``), so a member buffer's sample unit (HER's
-relabelling of the drawn ``(episode, step)`` pairs) never runs, and the priority update of a stock
-buffer cannot route its index. A sampler over the one episode storage keeps the stock buffer, HER,
-transforms, the ``[B, 2]`` index and the checkpoints exactly as they are.
-"""
+"""Baselines' per-MPI-worker replay in one stock buffer (why, and why not ``ReplayBufferEnsemble``: docs/replay.md)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import torch
@@ -30,19 +13,16 @@ from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import shared_length, stored_lengths
-from torchrl_cebp.replay.samplers.base import EpisodeSampler, dump_state, load_state, split_index
+from torchrl_cebp.replay.samplers.base import EpisodeSampler, dump_state, load_state, split_index, stored_rows
 
 
 @dataclass(frozen=True)
 class WorkerLayout:
     """Which worker owns each episode row: ``episodes_per_worker`` consecutive rows each, dealt out in turn.
 
-    Global row ``g`` belongs to worker ``(g // e) % W`` as its local row ``(g // (e W)) e + g % e``. A buffer that
-    writes ``e x W`` episodes per cycle, env ``i`` of the cycle being episode ``i``, thus gives worker ``w`` the
-    episodes of its envs ``w e .. w e + e - 1``. With a row count that is not a multiple of ``e x W`` the workers'
-    shares differ by up to ``e`` rows, and once the writer wraps around the storage a cycle's envs reach the workers
-    shifted; the default capacities (1e6 transitions of 50- or 100-step episodes, 16 envs) are multiples, 70-step
-    Slide's 14,286 rows are not.
+    A buffer that writes ``e x W`` episodes per cycle thus gives worker ``w`` those of its envs ``w e .. w e + e - 1``.
+    With a row count that is not a multiple of ``e x W`` (70-step Slide's 14,286 rows) the workers' shares differ by up
+    to ``e`` rows, and once the writer wraps around the storage a cycle's envs reach the workers shifted.
 
     Args:
         workers (int): the number of workers ``W``.
@@ -50,12 +30,8 @@ class WorkerLayout:
 
     Examples:
         >>> layout = WorkerLayout(workers=8, episodes_per_worker=2)
-        >>> layout.rows_of_worker(14286, 0), layout.rows_of_worker(14286, 7)
-        (1786, 1784)
-        >>> rows = torch.tensor([0, 3, 17])
-        >>> workers = layout.worker_of(rows)
-        >>> workers.tolist(), layout.global_rows(layout.local_rows(rows), workers).tolist()
-        ([0, 1, 0], [0, 3, 17])
+        >>> layout.worker_of(torch.tensor([0, 3, 17])).tolist(), layout.rows_of_worker(14286, 7)
+        ([0, 1, 0], 1784)
     """
 
     workers: int
@@ -77,8 +53,7 @@ class WorkerLayout:
 
     def local_rows(self, rows: torch.Tensor) -> torch.Tensor:
         """Each of the storage ``rows`` as a row of its worker."""
-        e = self.episodes_per_worker
-        return rows // self.cycle * e + rows % e
+        return rows // self.cycle * self.episodes_per_worker + rows % self.episodes_per_worker
 
     def global_rows(self, local_rows: torch.Tensor, worker: int | torch.Tensor) -> torch.Tensor:
         """The storage rows of ``worker``'s (one, or one per row) ``local_rows``."""
@@ -92,13 +67,11 @@ class WorkerLayout:
         return full * e + min(max(rest - worker * e, 0), e)
 
 
-class WorkerRows(Storage):
+class WorkerRows(_upstream.StorageView, Storage):
     """Worker ``w``'s episode rows of a ``[rows, T]`` storage, as a read-only TorchRL storage of their own (a view).
 
-    Rows are dealt to the workers by a :class:`WorkerLayout`. Any sampler reading a storage through
-    TorchRL's :class:`~torchrl.data.replay_buffers.Storage` interface (``ndim``, ``shape``, ``max_size``,
-    ``len``, ``get``, the random draw of :class:`~torchrl.data.RandomSampler`) reads the worker's rows in its own
-    numbering; writes go through the whole storage.
+    A sampler reading it through TorchRL's :class:`~torchrl.data.replay_buffers.Storage` interface (``shape``,
+    ``max_size``, ``len``, ``get``, :class:`~torchrl.data.RandomSampler`'s draw) sees the worker's rows as its own.
 
     Args:
         storage (Storage): the episode storage (``ndim=2``).
@@ -106,7 +79,6 @@ class WorkerRows(Storage):
         layout (WorkerLayout): how the rows are dealt out.
 
     Examples:
-        >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl_cebp.replay import EpisodeStorage
         >>> storage = EpisodeStorage(8 * 5)  # 8 rows of 5 steps
@@ -121,11 +93,7 @@ class WorkerRows(Storage):
     # Storage.__init__ is not called: it sets max_size, which a view reads from the storage it views.
     def __init__(self, storage: Storage, worker: int, layout: WorkerLayout) -> None:
         self.storage, self.worker, self.layout = storage, worker, layout
-
-    @property
-    def _rng(self) -> torch.Generator | None:
-        """The generator the buffer gave the whole storage: a stock sampler's draws over the view use it."""
-        return _upstream.buffer_generator(self.storage)
+        self._gathered: tuple[torch.Tensor, int, torch.Tensor] | None = None  # write_counts, until a write
 
     @property
     def device(self) -> torch.device:
@@ -135,25 +103,21 @@ class WorkerRows(Storage):
         """The storage rows of this worker's ``local_rows``."""
         return self.layout.global_rows(local_rows, self.worker)
 
-    def rows_within(self, global_rows: int) -> int:
-        """How many of the first ``global_rows`` storage rows are this worker's."""
-        return self.layout.rows_of_worker(global_rows, self.worker)
-
     @property
     def shape(self) -> torch.Size:
-        return torch.Size([self.rows_within(self.storage.shape[0]), self.storage.shape[1]])
+        return torch.Size([self.layout.rows_of_worker(self.storage.shape[0], self.worker), self.storage.shape[1]])
 
     @property
     def max_size(self) -> int:
         row_length = self.storage.shape[1]
-        return self.rows_within(self.storage.max_size // row_length) * row_length
+        return self.layout.rows_of_worker(self.storage.max_size // row_length, self.worker) * row_length
 
     def __len__(self) -> int:
         return self.shape.numel()
 
     def get(self, index: slice | torch.Tensor | tuple) -> TensorDictBase:
         if isinstance(index, slice):
-            return self.storage.get(self.global_rows(torch.arange(self.shape[0])[index]))
+            index = torch.arange(self.shape[0])[index]
         if isinstance(index, tuple):
             return self.storage.get((self.global_rows(torch.as_tensor(index[0])), *index[1:]))
         return self.storage.get(self.global_rows(torch.as_tensor(index)))
@@ -171,11 +135,10 @@ class WorkerRows(Storage):
         """The valid length every episode of the storage shares, else ``None``."""
         return shared_length(self.storage, self.end_key)
 
-    def _rand_given_ndim(self, batch_size: int) -> tuple[torch.Tensor, torch.Tensor]:
-        return tuple(torch.randint(size, (batch_size,), generator=self._rng) for size in self.shape)
+    def set(self, *args: Any, **kwargs: Any) -> None:
+        raise RuntimeError("WorkerRows is a read-only view of a worker's rows: write into, or empty, the whole storage")
 
-    def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
-        raise RuntimeError("WorkerRows is a read-only view of a worker's rows: write into the whole storage")
+    _empty = set
 
     def state_dict(self) -> dict[str, Any]:
         return {}  # a view: the whole storage saves the rows
@@ -184,80 +147,54 @@ class WorkerRows(Storage):
         if state_dict:
             raise ValueError(f"WorkerRows keeps no state of its own, got {sorted(state_dict)}")
 
-    def _empty(self) -> None:
-        raise RuntimeError("WorkerRows is a read-only view of a worker's rows: empty the whole storage")
-
     def contains(self, item: Any) -> bool:
         raise NotImplementedError("WorkerRows answers no membership: ask the whole storage")
 
     @property
     def write_counts(self) -> torch.Tensor | None:
-        """The storage's write counts of this worker's rows, then of its write starts and ends (``None`` if none).
-
-        Gathered again only after a write: a draw that follows none costs one read."""
+        """The storage's write counts of this worker's rows, then of its write starts and ends (``None`` if none)."""
         counts = getattr(self.storage, "write_counts", None)
         if counts is None:
             return None
-        source, writes, rows, cached = self.__dict__.get("_counts", (None, None, None, None))
-        if source is not counts:  # which storage rows are this worker's: fixed with the storage's counts
-            rows = self.global_rows(torch.arange(self.rows_within(counts.numel() - 1)))
-        if source is not counts or int(counts[-1]) != writes:
-            writes = int(counts[-1])  # read first: a write after it renews the gathered rows at the next call
-            cached = torch.cat([counts.index_select(0, rows), torch.tensor([writes])])
-            self.__dict__["_counts"] = counts, writes, rows, cached
-        return cached
+        writes = int(counts[-1])  # read first: a write during the gather renews it at the next call
+        if self._gathered is None or self._gathered[0] is not counts or self._gathered[1] != writes:
+            rows = self.global_rows(torch.arange(self.layout.rows_of_worker(counts.numel() - 1, self.worker)))
+            self._gathered = counts, writes, torch.cat([counts.index_select(0, rows), torch.tensor([writes])])
+        return self._gathered[2]
 
 
 class PerWorkerSampler(Sampler):
     """``W`` samplers, one per emulated worker, each over its own episodes: baselines' per-worker replay.
 
-    Put it in place of any episode sampler of this package (or any TorchRL sampler that reaches its
-    storage through ``ndim``, ``shape``, ``max_size``, ``len`` and ``get``, as
-    :class:`~torchrl.data.PrioritizedSampler` does) in a stock buffer over one episode storage.
-    Each worker's sampler sees only that worker's rows (a :class:`WorkerRows` view), so its
-    priorities, density model (MEP), segment trees (PER), episode count and importance-sampling
-    normalisation are its own. A draw of ``batch_size`` concatenates the ``W`` workers' draws of
-    ``batch_size // W``, worker 0 first, with ``"priority_weight"`` normalised by each worker's own sampler.
-    Of PERs it is a :class:`PrioritizedPerWorkerSampler` (a TorchRL ``PrioritizedSampler``), so that
-    ``rb.update_tensordict_priority(batch)`` feeds each worker's PER; of episode samplers it is an
-    :class:`EpisodePerWorkerSampler` (an :class:`~torchrl_cebp.replay.samplers.EpisodeSampler`).
-
-    The loss over such a batch is its plain mean: with equal parts that is the mean of the ``W``
-    per-worker means, which baselines' sum of the ``W`` workers' gradients equals up to the factor
-    ``W``, which Adam ignores (up to its epsilon).
+    It wraps any episode sampler of this package, or TorchRL's :class:`~torchrl.data.PrioritizedSampler`, each
+    over its worker's :class:`WorkerRows`, so its priorities, episode count and IS weights' normalisation are its own.
+    A draw of ``batch_size`` concatenates the workers' draws of ``batch_size // W``, worker 0 first. Built from PERs
+    it is a :class:`PrioritizedPerWorkerSampler`, from episode samplers an :class:`EpisodePerWorkerSampler`.
 
     Args:
-        *samplers (Sampler): one sampler per worker, each a fresh instance (the number of them is ``W``).
-        episodes_per_worker (int, optional): consecutive episode rows each worker owns in turn: its envs per
-            cycle (baselines' ``rollout_batch_size``, 2). Write ``episodes_per_worker x W`` episodes
-            at a time, as the cycles of the trainer do. Defaults to ``1``.
+        *samplers (Sampler): one fresh sampler instance per worker; their number is ``W``.
+        episodes_per_worker (int, optional): consecutive episode rows each worker owns in turn, its envs per cycle
+            (baselines' ``rollout_batch_size``): write ``episodes_per_worker x W`` episodes at a time.
+            Defaults to ``1``.
 
     Raises:
         ValueError: if no sampler is given, or one instance is given twice.
 
     Examples:
-        >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import TensorDictReplayBuffer
         >>> from torchrl_cebp.replay import EpisodeStorage
-        >>> from torchrl_cebp.replay.samplers import InitialCEBPSampler, PerWorkerSampler
-        >>> n, T = 8, 50
-        >>> episodes = TensorDict({"achieved_goal": torch.rand(n, T, 3), "touch": torch.rand(n, T, 2),
-        ...     "observation": torch.rand(n, T, 25),
-        ...     "next": {"achieved_goal": torch.rand(n, T, 3), "observation": torch.rand(n, T, 25)}}, [n, T])
-        >>> sampler = PerWorkerSampler(*[InitialCEBPSampler(touch_key="touch") for _ in range(4)],
-        ...                            episodes_per_worker=2)
-        >>> rb = TensorDictReplayBuffer(storage=EpisodeStorage(16 * T), sampler=sampler, batch_size=8, dim_extend=0)
-        >>> _ = rb.extend(episodes)
-        >>> rows = rb.sample()["index"][:, 0]
-        >>> (rows // 2).tolist() == [0, 0, 1, 1, 2, 2, 3, 3]  # two draws from each worker's two episodes
-        True
+        >>> from torchrl_cebp.replay.samplers import UniformEpisodeSampler
+        >>> sampler = PerWorkerSampler(*[UniformEpisodeSampler() for _ in range(4)], episodes_per_worker=2)
+        >>> rb = TensorDictReplayBuffer(storage=EpisodeStorage(16 * 50), sampler=sampler, batch_size=8, dim_extend=0)
+        >>> _ = rb.extend(TensorDict({"observation": torch.rand(8, 50, 25)}, [8, 50]))
+        >>> (rb.sample()["index"][:, 0] // 2).tolist()  # two draws from each worker's two episodes
+        [0, 0, 1, 1, 2, 2, 3, 3]
     """
 
     def __new__(cls, *samplers: Sampler, episodes_per_worker: int = 1) -> PerWorkerSampler:
-        # What the workers' samplers are, it is too: a PrioritizedSampler of PERs, so that TorchRL's
-        # rb.update_tensordict_priority(batch), which feeds only those, reaches them; an EpisodeSampler of episode
-        # samplers, which the trainer asks for the draw's probabilities.
+        # What the workers' samplers are, it is too: a PrioritizedSampler, which alone TorchRL's
+        # rb.update_tensordict_priority(batch) feeds; an EpisodeSampler, which the trainer asks for probabilities.
         if cls is PerWorkerSampler and samplers:
             if all(isinstance(sampler, PrioritizedSampler) for sampler in samplers):
                 cls = PrioritizedPerWorkerSampler
@@ -266,75 +203,54 @@ class PerWorkerSampler(Sampler):
         return super().__new__(cls)
 
     def __init__(self, *samplers: Sampler, episodes_per_worker: int = 1) -> None:
-        if not samplers:
-            raise ValueError("PerWorkerSampler needs one sampler per worker, got none")
-        if len({id(sampler) for sampler in samplers}) != len(samplers):
-            raise ValueError("PerWorkerSampler needs a separate sampler instance for each worker")
+        if not samplers or len({id(sampler) for sampler in samplers}) != len(samplers):
+            raise ValueError("PerWorkerSampler needs a separate sampler instance for each worker (at least one)")
         self.samplers = samplers
         self.layout = WorkerLayout(len(samplers), episodes_per_worker)
-        self._rng_private: torch.Generator | None = None
         self._views: list[WorkerRows] = []
-
-    @property
-    def workers(self) -> int:
-        return self.layout.workers
-
-    @property
-    def episodes_per_worker(self) -> int:
-        return self.layout.episodes_per_worker
 
     # One generator drives every worker's draws, in worker order, as SamplerEnsemble shares its own.
     @property
     def _rng(self) -> torch.Generator | None:
-        return self._rng_private
+        return _upstream.sampler_generator(self.samplers[0])
 
     @_rng.setter
     def _rng(self, value: torch.Generator | None) -> None:
-        self._rng_private = value
         for sampler in self.samplers:
             sampler._rng = value
 
     def worker_views(self, storage: Storage) -> list[WorkerRows]:
         """Each worker's rows of ``storage``, as the storages its sampler sees."""
-        if not self._views or self._views[0].storage is not storage:
-            if getattr(storage, "ndim", 1) != 2:
+        if self._views and self._views[0].storage is storage:
+            return self._views
+        ndim = getattr(storage, "ndim", 1)
+        if ndim != 2:
+            raise ValueError(f"PerWorkerSampler needs an episode storage with ndim=2, got ndim={ndim}")
+        views = [WorkerRows(storage, worker, self.layout) for worker in range(self.layout.workers)]
+        for view, sampler in zip(views, self.samplers):
+            if getattr(sampler, "max_size", view.max_size) < view.max_size:  # a sampler sized by capacity (PER)
                 raise ValueError(
-                    f"PerWorkerSampler needs an episode storage with ndim=2, got ndim={getattr(storage, 'ndim', 1)}"
+                    f"worker {view.worker}'s {type(sampler).__name__} holds {sampler.max_size} transitions, but the "
+                    f"worker owns {view.max_size} of the storage's {storage.max_size}"
                 )
-            views = [WorkerRows(storage, worker, self.layout) for worker in range(self.workers)]
-            for view, sampler in zip(views, self.samplers):
-                # A sampler sized by capacity (PER's trees) must cover its worker's rows.
-                capacity = getattr(sampler, "max_size", None)
-                if capacity is not None and capacity < view.max_size:
-                    raise ValueError(
-                        f"worker {view.worker}'s {type(sampler).__name__} holds {capacity} transitions, but the "
-                        f"worker owns {view.max_size} of the storage's {storage.max_size}"
-                    )
-            self._views = views
-        return self._views
+        self._views = views
+        return views
 
     def _by_worker(self, index: Any) -> list[tuple[int, torch.Tensor, Any]]:
-        """Splits a ``[k, 2]`` / ``(rows, steps)`` / rows index by worker: ``(worker, positions, local index)``."""
-        if isinstance(index, tuple):
-            rows = torch.as_tensor(index[0])
-        else:
-            index = torch.as_tensor(index)
-            rows = index[..., 0] if index.ndim > 1 else index
+        """Splits a ``(rows, steps)`` / ``[k, 2]`` / rows index by worker: ``(worker, positions, local index)``."""
+        stacked = None if isinstance(index, tuple) else torch.as_tensor(index)
+        columns = index if stacked is None else stacked.unbind(-1) if stacked.ndim > 1 else (stacked,)
+        rows = torch.as_tensor(columns[0])
         workers, local_rows = self.layout.worker_of(rows), self.layout.local_rows(rows)
         parts = []
         for worker in workers.unique().tolist():
             positions = (workers == worker).nonzero().squeeze(-1)
-            if isinstance(index, tuple):
-                local = (local_rows[positions], *(part[positions] for part in index[1:]))
-            elif index.ndim > 1:
-                local = index[positions].clone()
-                local[..., 0] = local_rows[positions]
-            else:
-                local = local_rows[positions]
+            local = (local_rows[positions], *(column[positions] for column in columns[1:]))
+            if stacked is not None:  # back to the form it came in
+                local = torch.stack(local, -1) if stacked.ndim > 1 else local[0]
             parts.append((worker, positions, local))
         return parts
 
-    # ---- TorchRL sampler interface ----------------------------------------------
     def extend(self, index: torch.Tensor | tuple) -> None:
         for worker, _, local in self._by_worker(index):
             self.samplers[worker].extend(local)
@@ -349,7 +265,7 @@ class PerWorkerSampler(Sampler):
                 "use it inside a replay buffer whose writer notifies it."
             )
         views = self.worker_views(storage)
-        self._check_lanes(index)
+        self._require_whole_cycles(stored_rows(index).numel())  # for a storage that runs no check_episodes
         for worker, _, local in self._by_worker(index):
             self.samplers[worker].mark_update(local, storage=views[worker])
 
@@ -362,22 +278,15 @@ class PerWorkerSampler(Sampler):
             if check is not None:
                 check(episodes)
 
-    def _check_lanes(self, index: Any) -> None:
-        """The episode count of :meth:`check_episodes`, for a storage that runs no check before a write."""
-        rows = torch.as_tensor(index)
-        self._require_whole_cycles((rows[..., 0] if rows.ndim > 1 else rows).unique().numel())
-
     def _require_whole_cycles(self, n_episodes: int) -> None:
         if n_episodes % self.layout.cycle:
             raise ValueError(
-                f"PerWorkerSampler deals the episodes of each write to {self.workers} workers, "
-                f"{self.episodes_per_worker} each in turn: write a multiple of {self.layout.cycle} episodes at a time "
-                f"(one per env), got {n_episodes}; other counts would mix the envs' lanes across workers"
+                f"PerWorkerSampler deals the episodes of each write to {self.layout.workers} workers, "
+                f"{self.layout.episodes_per_worker} each in turn: write a multiple of {self.layout.cycle} episodes "
+                f"at a time (one per env), got {n_episodes}; other counts would mix the envs' lanes across workers"
             )
 
-    def update_priority(
-        self, index: torch.Tensor, priority: float | torch.Tensor, *, storage: Storage | None = None
-    ) -> None:
+    def update_priority(self, index: Any, priority: float | torch.Tensor, *, storage: Storage | None = None) -> None:
         priority = torch.as_tensor(priority)
         for worker, positions, local in self._by_worker(index):
             part = priority[positions] if priority.numel() > 1 else priority
@@ -385,51 +294,38 @@ class PerWorkerSampler(Sampler):
             self.samplers[worker].update_priority(local, part, storage=view)
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple[torch.Tensor, torch.Tensor], dict]:
-        if batch_size % self.workers:
+        workers = self.layout.workers
+        if batch_size % workers:
             raise ValueError(
                 f"PerWorkerSampler draws batch_size // workers from each worker: batch_size={batch_size} must be "
-                f"a multiple of workers={self.workers}"
+                f"a multiple of workers={workers}"
             )
         views = self.worker_views(storage)
         # The last worker owns the fewest of the filled rows: if it has one, every worker has.
-        if views[-1].rows_within(storage.shape[0]) == 0:
+        if not len(views[-1]):
             raise RuntimeError(
-                f"PerWorkerSampler: a worker holds no episodes yet: write {self.episodes_per_worker * self.workers} "
-                f"episodes at a time, {self.episodes_per_worker} per worker"
+                f"PerWorkerSampler: a worker holds no episodes yet: write {self.layout.cycle} "
+                f"episodes at a time, {self.layout.episodes_per_worker} per worker"
             )
-        rows, steps, weights = [], [], []
-        for view, sampler in zip(views, self.samplers):
-            index, info = sampler.sample(view, batch_size // self.workers)
-            local_rows, local_steps = split_index(index)
-            rows.append(local_rows)
-            steps.append(local_steps)
-            if "priority_weight" in info:
-                weights.append(torch.as_tensor(info["priority_weight"]))
-        info = {"priority_weight": torch.cat(weights)} if weights else {}
-        # Every worker's local rows to storage rows in one go.
-        worker = torch.arange(self.workers).repeat_interleave(batch_size // self.workers)
-        global_rows = self.layout.global_rows(torch.cat(rows), worker)
-        return (global_rows, torch.cat(steps)), info
+        draws = [sampler.sample(view, batch_size // workers) for view, sampler in zip(views, self.samplers)]
+        rows, steps = zip(*(split_index(index) for index, _ in draws))
+        weights = [torch.as_tensor(info["priority_weight"]) for _, info in draws if "priority_weight" in info]
+        worker = torch.arange(workers).repeat_interleave(batch_size // workers)
+        rows = self.layout.global_rows(torch.cat(rows), worker)
+        return (rows, torch.cat(steps)), ({"priority_weight": torch.cat(weights)} if weights else {})
 
-    # ---- state --------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
-        return {
-            "workers": self.workers,
-            "episodes_per_worker": self.episodes_per_worker,
-            "shards": [sampler.state_dict() for sampler in self.samplers],
-        }
+        return {**asdict(self.layout), "shards": [sampler.state_dict() for sampler in self.samplers]}
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
-        self._check_layout(state_dict["workers"], state_dict["episodes_per_worker"])
+        saved, layout = WorkerLayout(state_dict["workers"], state_dict["episodes_per_worker"]), self.layout
+        if saved != layout:
+            raise ValueError(
+                f"the saved replay has {saved.workers} workers of {saved.episodes_per_worker} episodes per cycle; "
+                f"this PerWorkerSampler has {layout.workers} of {layout.episodes_per_worker}"
+            )
         for sampler, state in zip(self.samplers, state_dict["shards"]):
             sampler.load_state_dict(state)
-
-    def _check_layout(self, workers: int, episodes_per_worker: int) -> None:
-        if (workers, episodes_per_worker) != (self.workers, self.episodes_per_worker):
-            raise ValueError(
-                f"the saved replay has {workers} workers of {episodes_per_worker} episodes per cycle; this "
-                f"PerWorkerSampler has {self.workers} of {self.episodes_per_worker}"
-            )
 
     def _empty(self) -> None:
         for sampler in self.samplers:
@@ -439,15 +335,12 @@ class PerWorkerSampler(Sampler):
     loads = load_state
 
     def __repr__(self) -> str:
-        return (f"PerWorkerSampler(workers={self.workers}, episodes_per_worker={self.episodes_per_worker}, "
-                f"sampler={self.samplers[0]!r})")
+        return (f"PerWorkerSampler(workers={self.layout.workers}, "
+                f"episodes_per_worker={self.layout.episodes_per_worker}, sampler={self.samplers[0]!r})")
 
 
 class EpisodePerWorkerSampler(PerWorkerSampler):
-    """A :class:`PerWorkerSampler` of episode samplers (:class:`EpisodeSampler`), which it becomes by itself.
-
-    An :class:`EpisodeSampler` over the whole storage: its episode count, draw probabilities and refit
-    are the workers' together.
+    """A :class:`PerWorkerSampler` of episode samplers, which it becomes by itself: an :class:`EpisodeSampler` too.
 
     Args:
         *samplers (EpisodeSampler): one episode sampler per worker, as for :class:`PerWorkerSampler`.
@@ -469,7 +362,7 @@ class EpisodePerWorkerSampler(PerWorkerSampler):
         """Probability that one draw of the whole batch takes each of ``rows`` (each worker fills ``1/W`` of it)."""
         probabilities = torch.empty(rows.shape, dtype=torch.float64)
         for worker, positions, local in self._by_worker(rows):
-            probabilities[positions] = self.samplers[worker].probabilities(local).double() / self.workers
+            probabilities[positions] = self.samplers[worker].probabilities(local).double() / self.layout.workers
         return probabilities
 
     def refit(self, storage: Storage) -> None:
@@ -481,31 +374,18 @@ class EpisodePerWorkerSampler(PerWorkerSampler):
 class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
     """A :class:`PerWorkerSampler` of :class:`~torchrl.data.PrioritizedSampler` s (PER), which it becomes by itself.
 
-    A PrioritizedSampler to TorchRL, so that ``rb.update_tensordict_priority(batch)`` feeds the batch's
-    priorities to :meth:`PerWorkerSampler.update_priority`, which routes each row to its worker's PER.
-    Everything else is :class:`PerWorkerSampler`'s; none of PrioritizedSampler's own state is built.
+    A PrioritizedSampler to TorchRL, so that ``rb.update_tensordict_priority(batch)`` routes each row's priority to
+    its worker's PER (:meth:`PerWorkerSampler.update_priority`). None of PrioritizedSampler's own state is built.
 
     Args:
         *samplers (PrioritizedSampler): one PER per worker, as for :class:`PerWorkerSampler`.
         episodes_per_worker (int, optional): as for :class:`PerWorkerSampler`. Defaults to ``1``.
 
     Examples:
-        >>> import torch
-        >>> from tensordict import TensorDict
-        >>> from torchrl.data import TensorDictReplayBuffer
-        >>> from torchrl_cebp.replay import EpisodeStorage
         >>> from torchrl_cebp.replay.samplers import PERSampler
         >>> sampler = PerWorkerSampler(PERSampler(4 * 50), PERSampler(4 * 50))
-        >>> type(sampler).__name__
-        'PrioritizedPerWorkerSampler'
-        >>> rb = TensorDictReplayBuffer(storage=EpisodeStorage(8 * 50), sampler=sampler, batch_size=4,
-        ...                             dim_extend=0, priority_key="td_error")
-        >>> _ = rb.extend(TensorDict({"observation": torch.randn(2, 50, 25)}, [2, 50]))
-        >>> batch = rb.sample()
-        >>> _ = batch.set("td_error", torch.full((4,), 1e3))
-        >>> rb.update_tensordict_priority(batch)
-        >>> [float(shard["max_priority"]) for shard in sampler.state_dict()["shards"]]  # the error fed back
-        [1000.0, 1000.0]
+        >>> type(sampler).__name__, isinstance(sampler, PrioritizedSampler)
+        ('PrioritizedPerWorkerSampler', True)
     """
 
     @property
@@ -529,8 +409,7 @@ class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
             sampler.beta = value
 
     def beta_scheduler(self) -> LinearScheduler:
-        """One linear schedule of every worker's beta, from ``beta`` to the workers' ``beta_end`` over their
-        ``beta_anneal_draws`` draws (:class:`~torchrl_cebp.replay.samplers.PERSampler`'s)."""
+        """One TorchRL linear schedule of every worker's beta, to the workers' ``beta_end`` in ``beta_anneal_draws``."""
         first = self.samplers[0]
         if not hasattr(first, "beta_end"):
             raise TypeError(f"the workers' {type(first).__name__} has no beta schedule: PERSampler has one")

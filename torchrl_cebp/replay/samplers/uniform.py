@@ -3,18 +3,18 @@ from __future__ import annotations
 
 import torch
 from tensordict import TensorDictBase
+from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler
 
 
 class UniformEpisodeSampler(EpisodePrioritySampler):
-    """Uniform episode, then uniform step: what HER (Andrychowicz et al.) replays.
+    """Uniform episode, then uniform valid step: what HER (Andrychowicz et al.) replays.
 
-    With episodes of one length this is the distribution TorchRL's
-    :class:`~torchrl.data.RandomSampler` draws over an ``ndim=2`` storage (every
-    stored transition equally likely). It stays because episodes may end early:
-    ``RandomSampler`` would draw their padding steps, this never does.
+    With episodes of one length this is TorchRL's :class:`~torchrl.data.RandomSampler` over an ``ndim=2``
+    storage; unlike it, this never draws the padding steps after an episode that ended early. It keeps no
+    priorities: a write costs it nothing but the count of filled rows.
 
     Args:
         end_key (NestedKey, optional): the flag that ends an episode; no step after it is drawn.
@@ -24,11 +24,9 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
-        >>> from torchrl_cebp.replay.samplers import UniformEpisodeSampler
-        >>> episodes = TensorDict({"observation": torch.randn(3, 50, 25)}, [3, 50])
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
         ...                             sampler=UniformEpisodeSampler(), batch_size=4, dim_extend=0)
-        >>> _ = rb.extend(episodes)
+        >>> _ = rb.extend(TensorDict({"observation": torch.randn(3, 50, 25)}, [3, 50]))
         >>> rb.sample()["index"].shape
         torch.Size([4, 2])
     """
@@ -36,6 +34,12 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         return torch.ones(episodes.shape[0], dtype=torch.float64)
 
+    def _catch_up(self, storage: Storage, written: torch.Tensor | None = None) -> None:
+        # Equal priorities: only how many rows are filled changes, whichever process filled them.
+        self._n_stored = storage.shape[0] if len(storage) else 0
+
     def draw_episodes(self, batch_size: int) -> torch.Tensor:
-        # Equal priorities: a plain randint is the same distribution without the tree walk.
         return torch.randint(self._n_stored, (batch_size,), generator=_upstream.sampler_generator(self))
+
+    def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
+        return torch.full(rows.shape, 1.0 / self._n_stored, dtype=torch.float64)
