@@ -2,6 +2,8 @@
 import numpy as np
 import pytest
 import torch
+from tensordict import TensorDict
+from torchrl.data import LazyTensorStorage
 from torchrl.envs import Transform, TransformedEnv
 
 from tests.replay.conftest import T, sparse_reward
@@ -9,7 +11,16 @@ from tests.replay.test_buffer import SAMPLERS
 from tests.replay.test_her import decode, labelled_episodes
 from torchrl_cebp.envs import make_env
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION
-from torchrl_cebp.replay import EpisodeWriter, HindsightRelabel, episode_lengths, make_replay_buffer
+from torchrl_cebp.replay import EpisodeStorage, EpisodeWriter, HindsightRelabel, episode_lengths, make_replay_buffer
+from torchrl_cebp.replay.episodes import (
+    common_length,
+    end_flags,
+    next_key,
+    require_time_at,
+    shared_length,
+    stored_lengths,
+    valid_steps,
+)
 from torchrl_cebp.replay.samplers import (
     CEBPSampler,
     MEPSampler,
@@ -183,3 +194,32 @@ def test_a_sampler_state_leaves_the_lengths_to_the_storage_and_older_states_stil
     assert rb.storage.valid_lengths(torch.arange(6)).tolist() == [9, 50, 4, 5, 6, 7]
     rows, steps = rb.sample()["index"].unbind(-1)
     assert (steps < torch.tensor([9, 50, 4, 5, 6, 7])[rows]).all()
+
+
+def test_the_row_helpers_read_flags_lengths_and_time_as_documented():
+    done = torch.zeros(2, 4, 1, dtype=torch.bool)
+    done[0, 1] = True
+    rows = TensorDict({"next": {"done": done}}, [2, 4])
+    assert next_key("achieved_goal") == ("next", "achieved_goal") and next_key(("a", "b")) == ("next", "a", "b")
+    assert end_flags(rows).int().tolist() == [[0, 1, 0, 0], [0, 0, 0, 0]] and end_flags(rows, "absent") is None
+    storage = LazyTensorStorage(8, ndim=2)  # not an episode storage: read at the rows' flags
+    storage.set(torch.arange(2), rows)
+    assert stored_lengths(storage, torch.tensor([1, 0])).tolist() == [4, 2] and shared_length(storage) is None
+    episode_storage_ = EpisodeStorage(4 * T)
+    whole = torch.zeros(2, T, 1, dtype=torch.bool)
+    episode_storage_.set(torch.arange(2), TensorDict({"next": {"done": whole}}, [2, T]))
+    assert shared_length(episode_storage_) == T and shared_length(episode_storage_, "other") is None
+    assert valid_steps(torch.tensor([2, 4]), 4).int().tolist() == [[1, 1, 0, 0], [1, 1, 1, 1]]
+    assert common_length(torch.tensor([50, 50])) == 50 and common_length(torch.tensor([50, 7])) is None
+    assert common_length(torch.tensor([], dtype=torch.long)) is None
+
+
+def test_require_time_at_blames_the_buffer_or_the_layout_and_reads_dim_extends_only_to_refuse():
+    frames = TensorDict(batch_size=[12, 50], names=[None, "time"])
+    require_time_at(frames, 1, dim_extends=lambda: pytest.fail("read without an error"))
+    causes = {(1,): "the buffer transposed it.*dim_extend=0$", (0,): "the batch is laid out with time first.*"
+              r"batch.transpose\(0, 1\)$", (): "either the buffer transposed it.*, or the batch is laid out"}
+    for dim_extends, cause in causes.items():
+        for given in (dim_extends, lambda: dim_extends):
+            with pytest.raises(ValueError, match=rf"shape \[50, 12\] has its 'time' dimension at 0, not 1: {cause}"):
+                require_time_at(frames.transpose(0, 1), 1, given)

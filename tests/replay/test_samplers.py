@@ -256,9 +256,9 @@ def test_mep_reranks_the_whole_buffer_on_every_write():
     fitted_lowest = scores[:N_EPISODES].min()
     # Scores below the fit's lowest tie with it at rank 0, as the paper's code clips them there.
     expected = mep_probabilities(np.clip(scores - fitted_lowest, 0, None))
-    assert torch.allclose(sampler._priorities[: len(both)], torch.from_numpy(expected))
+    assert torch.allclose(sampler.priorities()[: len(both)], torch.from_numpy(expected))
     # The two novel episodes rank above every fitted one, each at a rank of its own.
-    assert sampler._priorities[N_EPISODES] > sampler._priorities[N_EPISODES + 1] > sampler._priorities[:N_EPISODES].max()
+    assert sampler.priorities()[N_EPISODES] > sampler.priorities()[N_EPISODES + 1] > sampler.priorities()[:N_EPISODES].max()
 
 
 def test_mep_ties_episodes_denser_than_any_fitted_one_at_rank_0():
@@ -269,10 +269,10 @@ def test_mep_ties_episodes_denser_than_any_fitted_one_at_rank_0():
     centre = torch.from_numpy(sampler._mixture.means_[sampler._mixture.weights_.argmax()]).float().view(T + 1, 3)
     densest["achieved_goal"][0, 0], densest["next", "achieved_goal"][0] = centre[0], centre[1:]
     raw = -sampler._mixture.score_samples(centre.double().view(1, -1).numpy())
-    lowest_fitted = sampler._priorities[:N_EPISODES].argmin()
+    lowest_fitted = sampler.priorities()[:N_EPISODES].argmin()
     assert raw < sampler.state_dict()["lowest_fit_score"]  # below every fitted episode: the floor applies
     rb.extend(densest)
-    assert sampler._priorities[N_EPISODES] == sampler._priorities[lowest_fitted] == 0.001 ** (1 / 1.01)
+    assert sampler.priorities()[N_EPISODES] == sampler.priorities()[lowest_fitted] == 0.001 ** (1 / 1.01)
 
 
 def test_an_emptied_mep_buffer_draws_uniformly_until_its_next_refit(either_storage):
@@ -314,7 +314,7 @@ def test_mep_state_round_trip_keeps_the_ranks_of_later_writes(either_storage):
     more = hand_made(2, seed=3)
     rb.extend(more)
     copy_.write_priorities(torch.arange(N_EPISODES, N_EPISODES + 2), more)
-    assert torch.equal(copy_._priorities, sampler._priorities)
+    assert torch.equal(copy_.priorities(), sampler.priorities())
     with pytest.raises(ValueError, match="start the run again"):
         MEPSampler().load_state_dict({k: v for k, v in sampler.state_dict().items() if k != "scores"})
 

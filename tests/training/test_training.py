@@ -641,3 +641,10 @@ def test_each_worker_keeps_its_own_capacity_of_episodes_when_capacity_is_per_wor
     assert [len(view) // 50 for view in sampler.worker_views(replay.storage)] == episodes_kept
     assert len(replay) == sum(episodes_kept) * 50
     assert rows(tmp_path / "progress.csv")[0]["replay_capacity"] == str(len(replay))  # 3 cycles filled it
+
+
+def test_help_says_what_the_default_scale_gives_and_how_to_train_a_working_agent():
+    out = subprocess.run([sys.executable, "train.py", "--help"], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "preset=paper" in out.stdout and "50 epochs in about 50 minutes" in out.stdout
+    assert "docs/results.md" in out.stdout

@@ -1,7 +1,7 @@
 """What every part of the replay reads from episode rows: their valid length, and their "next" keys."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 from tensordict import TensorDictBase
@@ -12,15 +12,7 @@ from torchrl_cebp import _upstream
 
 
 def next_key(key: NestedKey) -> tuple[str, ...]:
-    """``("next", *key)``: where TorchRL keeps the next-state's entry of ``key``.
-
-    Args:
-        key (NestedKey): the entry's key.
-
-    Examples:
-        >>> next_key("achieved_goal")
-        ('next', 'achieved_goal')
-    """
+    """``("next", *key)``: where TorchRL keeps the next-state's entry of ``key``."""
     return ("next", *((key,) if isinstance(key, str) else key))
 
 
@@ -56,20 +48,7 @@ def episode_lengths(
 def end_flags(
     episodes: TensorDictBase, end_key: NestedKey = ("next", "done"), rows: torch.Tensor | None = None
 ) -> torch.Tensor | None:
-    """``[n, T]``: whether each step of the rows (of ``rows``, if given) ends an episode; ``None`` without ``end_key``.
-
-    Args:
-        episodes (TensorDictBase): episode rows ``[n, T]``.
-        end_key (NestedKey, optional): the flag that ends an episode. Defaults to ``("next", "done")``.
-        rows (torch.Tensor, optional): the rows to read. Defaults to ``None`` (all rows).
-
-    Examples:
-        >>> from tensordict import TensorDict
-        >>> done = torch.zeros(2, 4, 1, dtype=torch.bool)
-        >>> done[0, 1] = True
-        >>> end_flags(TensorDict({"next": {"done": done}}, [2, 4])).int().tolist()
-        [[0, 1, 0, 0], [0, 0, 0, 0]]
-    """
+    """``[n, T]``: whether each step of the rows (``rows``, if given) ends an episode; ``None`` without ``end_key``."""
     ends = episodes.get(end_key, None)
     if ends is None:
         return None
@@ -79,26 +58,9 @@ def end_flags(
 
 
 def stored_lengths(storage: Storage, rows: torch.Tensor, end_key: NestedKey = ("next", "done")) -> torch.Tensor:
-    """Valid steps of the episodes in ``rows`` of any ``ndim=2`` storage.
+    """Valid steps of the episodes in ``rows`` of any ``ndim=2`` storage: the one way samplers, PER and HER learn them.
 
-    The one way samplers, PER and HER learn them: an episode storage keeps them (its ``valid_lengths``), and
-    answers when it cuts episodes at the same ``end_key``; any other storage (TorchRL's ``LazyTensorStorage``)
-    is read at the rows' flags.
-
-    Args:
-        storage (Storage): an ``ndim=2`` storage of episode rows.
-        rows (torch.Tensor): the rows to measure.
-        end_key (NestedKey, optional): the flag that ends an episode. Defaults to ``("next", "done")``.
-
-    Examples:
-        >>> from tensordict import TensorDict
-        >>> from torchrl.data import LazyTensorStorage
-        >>> done = torch.zeros(2, 4, 1, dtype=torch.bool)
-        >>> done[0, 1] = True
-        >>> storage = LazyTensorStorage(8, ndim=2)
-        >>> storage.set(torch.arange(2), TensorDict({"next": {"done": done}}, [2, 4]))
-        >>> stored_lengths(storage, torch.tensor([1, 0])).tolist()
-        [4, 2]
+    An episode storage that cuts at the same ``end_key`` keeps them; any other storage is read at the rows' flags.
     """
     if getattr(storage, "end_key", None) == end_key and hasattr(storage, "valid_lengths"):
         return storage.valid_lengths(rows)
@@ -108,53 +70,26 @@ def stored_lengths(storage: Storage, rows: torch.Tensor, end_key: NestedKey = ("
 
 
 def shared_length(storage: Storage, end_key: NestedKey = ("next", "done")) -> int | None:
-    """The valid length every episode of ``storage`` shares, when its storage knows one, else ``None``.
+    """The valid length all episodes of ``storage`` share, if an episode storage cutting at ``end_key`` knows one.
 
     Lets a draw skip the per-row lengths in the usual case of episodes that all run a fixed length.
-
-    Args:
-        storage (Storage): an ``ndim=2`` storage of episode rows.
-        end_key (NestedKey, optional): the flag that ends an episode; the storage answers only when it cuts
-            episodes at the same key. Defaults to ``("next", "done")``.
-
-    Examples:
-        >>> from torchrl_cebp.replay import EpisodeStorage
-        >>> from tensordict import TensorDict
-        >>> storage = EpisodeStorage(4 * 50)
-        >>> done = torch.zeros(2, 50, 1, dtype=torch.bool)
-        >>> storage.set(torch.arange(2), TensorDict({"next": {"done": done}}, [2, 50]))
-        >>> shared_length(storage)
-        50
     """
     if getattr(storage, "end_key", None) == end_key and hasattr(storage, "common_length"):
         return storage.common_length()
     return None
 
 
-def require_time_at(data: TensorDictBase, dim: int, dim_extends: Sequence[int] = ()) -> None:
+def require_time_at(
+    data: TensorDictBase, dim: int, dim_extends: Sequence[int] | Callable[[], Sequence[int]] = ()
+) -> None:
     """Refuses a batch whose ``"time"`` dimension (TorchRL's collectors and ``rollout`` name it) is not ``dim``.
 
-    Args:
-        data (TensorDictBase): the batch as the storage or writer receives it.
-        dim (int): where its time dimension must be.
-        dim_extends (sequence of int, optional): the ``dim_extend`` of the buffers writing it, to tell a batch
-            the buffer transposed (``dim_extend`` other than 0) from one laid out ``[T, envs]``. Defaults to none.
-
-    Examples:
-        >>> from tensordict import TensorDict
-        >>> frames = TensorDict(batch_size=[12, 50], names=[None, "time"])
-        >>> require_time_at(frames, 1)
-        >>> require_time_at(frames.transpose(0, 1), 1, dim_extends=[1])  # doctest: +ELLIPSIS
-        Traceback (most recent call last):
-        ...
-        ValueError: the batch of shape [50, 12] has its 'time' dimension at 0, not 1: the buffer ... dim_extend=0
-        >>> require_time_at(frames.transpose(0, 1), 1, dim_extends=[0])  # doctest: +ELLIPSIS
-        Traceback (most recent call last):
-        ...
-        ValueError: the batch of shape [50, 12] has its 'time' dimension at 0, not 1: the batch is laid out ...
+    ``dim_extends`` (or a function giving them, called only to word the error) are the ``dim_extend`` of the
+    buffers writing it: they tell a batch the buffer transposed from one laid out ``[T, envs]``.
     """
     names = data.names
     if "time" in names and names.index("time") != dim:
+        dim_extends = dim_extends() if callable(dim_extends) else dim_extends
         transposed_by_buffer = "the buffer transposed it (its dim_extend is not 0): build it with dim_extend=0"
         laid_out = (f"the batch is laid out with time first; give it with time last, e.g. "
                     f"batch.transpose({names.index('time')}, {dim})")
@@ -171,29 +106,12 @@ def require_time_at(data: TensorDictBase, dim: int, dim_extends: Sequence[int] =
 
 
 def valid_steps(lengths: torch.Tensor, row_length: int) -> torch.Tensor:
-    """``[n, T]`` mask of the steps inside each episode's valid length.
-
-    Args:
-        lengths (torch.Tensor): the episodes' valid lengths, shape ``[n]``.
-        row_length (int): ``T``, the steps a row holds.
-
-    Examples:
-        >>> valid_steps(torch.tensor([2, 4]), 4).int().tolist()
-        [[1, 1, 0, 0], [1, 1, 1, 1]]
-    """
+    """``[n, T]`` mask of the steps inside each episode's valid length (``lengths``, shape ``[n]``)."""
     return torch.arange(row_length) < lengths.unsqueeze(-1)
 
 
 def common_length(lengths: torch.Tensor) -> int | None:
-    """The length all of ``lengths`` share, else ``None`` (also for none): draws then need no per-row lengths.
-
-    Args:
-        lengths (torch.Tensor): the episodes' valid lengths, shape ``[n]``.
-
-    Examples:
-        >>> common_length(torch.tensor([50, 50])), common_length(torch.tensor([50, 7]))
-        (50, None)
-    """
+    """The length all of ``lengths`` share, else ``None`` (also for none): draws then need no per-row lengths."""
     if lengths.numel() == 0 or not bool((lengths == lengths[0]).all()):
         return None
     return int(lengths[0])

@@ -15,38 +15,22 @@ from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import episode_lengths, next_key, shared_length, stored_lengths
 from torchrl_cebp.replay.samplers.base import require_key, split_index
 
-RewardFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 STRATEGIES = ("future", "final", "episode", "past")
 
 
 class HindsightRelabel(SampleUnit):
     """Replaces the goal of sampled transitions by a goal the episode achieved, before the buffer's transforms.
 
-    Give one instance to a stock :class:`~torchrl.data.TensorDictReplayBuffer` over an episode
-    storage (``ndim=2``) twice: as its ``sample_unit`` (which sees the drawn ``(episode, step)``
-    pairs and the storage) and as its ``collate_fn`` (which writes the new goals and rewards into
-    the batch read from the storage). The buffer calls the collate function before its transforms,
-    so every transform sees, and may change, the relabelled goal and reward. Any sampler works,
-    ours or TorchRL's (``RandomSampler``, ``PrioritizedSampler``).
-
-    For each sampled transition ``(e, t)`` a coin with probability ``future_p`` decides whether to
-    relabel; the new goal is the achieved goal of a next-state of the same episode:
-
-    * ``"future"``: state ``t' = t + 1 + floor(U * (L - t))``, a *later* next-state, never the
-      current state, possibly the final one (baselines' HER);
-    * ``"final"``: the episode's final state;
-    * ``"episode"``: any next-state of the episode, uniformly;
-    * ``"past"``: CPER's published draw (its ``her.py``): the drawn step ``t`` gives the goal, next-state
-      ``t + 1``, and the transition replayed is an earlier one, ``t' = floor(U * t)``, relabelled or not.
-      With a sampler that weighs steps (CPER's contact weights) the weights thus pick goals, not transitions.
-
-    ``L`` is the episode's valid length: the step after its first ``end_key`` (``("next", "done")``)
-    flag, or the row length without one. No goal comes from beyond it.
-
-    How this differs from :class:`torchrl.data.HERReplayBuffer`: that buffer relabels the first
-    ``her_ratio`` of each batch after the transforms, over a flat storage, and "future" may pick the
-    transition's own state; here each transition tosses its own ``future_p`` coin, goals come from a
-    strictly later next-state, the relabelling happens before the transforms, and episodes are rows.
+    Give one instance to a stock :class:`~torchrl.data.TensorDictReplayBuffer` over an episode storage (``ndim=2``)
+    twice: as its ``sample_unit`` (it sees the drawn ``(episode, step)`` pairs and the storage) and as its
+    ``collate_fn`` (it writes the new goals and rewards into the batch, before the transforms). Any sampler works,
+    ours or TorchRL's. For each transition ``(e, t)`` a coin with probability ``future_p`` decides whether to
+    relabel; the new goal is the achieved goal of a next-state of the episode, within its valid length ``L``
+    (up to its first ``end_key`` flag): ``"future"`` a strictly later one, ``t + 1 + floor(U * (L - t))``
+    (baselines' HER); ``"final"`` the last; ``"episode"`` any; ``"past"`` (CPER's draw) that of the drawn step
+    ``t``, for an earlier transition ``floor(U * t)`` replayed instead, so a sampler's weights pick goals. The coin
+    and goals draw from the buffer's generator, whose state ``rb.state_dict()`` keeps. ``docs/replay.md`` compares
+    it with :class:`torchrl.data.HERReplayBuffer`.
 
     Args:
         reward_fn (Callable[[torch.Tensor, torch.Tensor], torch.Tensor]): vectorised sparse reward,
@@ -64,15 +48,10 @@ class HindsightRelabel(SampleUnit):
             Defaults to ``("next", "done")``.
         relabelled_key (NestedKey or None, optional): a bool entry of the sample info telling which
             transitions were relabelled (``None`` to omit it). Defaults to ``"her_relabelled"``.
-        success_key (NestedKey or None, optional): the success flag of the next-state (the Fetch envs'
-            ``is_success``), rewritten from the relabelled reward: success where the reward is 0, as the sparse
-            reward gives it only on reaching the goal. ``None`` leaves it as stored (it then holds the stored
-            goal's success, not the relabelled one's); a batch without it is left without it.
-            Defaults to ``("next", "is_success")``.
-
-    In a buffer the coin and the goal choice draw from the buffer's generator (``generator=`` or
-    ``set_rng``; else torch's global one), the one the sampler draws from: ``rb.state_dict()``
-    keeps its state, so a restored buffer relabels as the original would have.
+        success_key (NestedKey or None, optional): the next-state's success flag (the Fetch envs' ``is_success``),
+            rewritten as ``reward == 0``: right for sparse rewards in {-1, 0} only, so any other reward is refused
+            while the flag is written. ``None`` leaves it as stored (the stored goal's success); a batch without it
+            is left without it. Defaults to ``("next", "is_success")``.
 
     Examples:
         >>> import torch
@@ -97,7 +76,7 @@ class HindsightRelabel(SampleUnit):
 
     def __init__(
         self,
-        reward_fn: RewardFn,
+        reward_fn: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
         *,
         future_p: float = 0.8,
         strategy: Literal["future", "final", "episode", "past"] = "future",
@@ -116,7 +95,6 @@ class HindsightRelabel(SampleUnit):
         self.future_p = float(future_p)
         self.strategy = strategy
         self.goal_key = goal_key
-        self.next_goal_key = next_key(goal_key)
         self.next_achieved_goal_key = next_key(achieved_goal_key)
         self.reward_key = reward_key
         self.end_key = end_key
@@ -125,40 +103,13 @@ class HindsightRelabel(SampleUnit):
         self._pending = threading.local()  # expand() -> collate() of one draw, per sampling thread
         self._collated = False  # whether a draw has reached collate(): the buffer calls it
 
-    def goal_steps(
-        self, steps: torch.Tensor, lengths: torch.Tensor | int, generator: torch.Generator | None = None
-    ) -> torch.Tensor:
-        """Index ``j`` into the ``("next", ...)`` entries whose achieved goal becomes the new goal.
-
-        ``("next", key)[e, j]`` is state ``j + 1``, so "future" draws ``j`` in ``[t, L - 1]``.
-        ``lengths`` are the episodes' valid lengths, or one length they all share.
-        """
-        last = lengths - 1
-        if self.strategy == "past":
-            return _at_most(steps.clone(), last)
-        if self.strategy == "final":
-            return torch.full_like(steps, last) if isinstance(last, int) else last.clone()
-        uniform = torch.rand(steps.shape, generator=generator)
-        if self.strategy == "episode":
-            return _at_most((uniform * lengths).long(), last)
-        # A step at or past its episode's end (the normaliser feed reads whole rows) has L - t <= 0, so
-        # t + offset stays >= L and the bound below gives it the episode's last goal, as a clamp of L - t at 0 would.
-        offset = uniform.mul_(lengths - steps).long()
-        return _at_most(offset.add_(steps), last)
-
     def relabel(
-        self,
-        episodes: TensorDictBase,
-        rows: torch.Tensor,
-        steps: torch.Tensor,
-        generator: torch.Generator | None = None,
-        lengths: torch.Tensor | int | None = None,
+        self, episodes: TensorDictBase, rows: torch.Tensor, steps: torch.Tensor,
+        generator: torch.Generator | None = None, lengths: torch.Tensor | int | None = None,
     ) -> dict[NestedKey, torch.Tensor]:
-        """The relabelled goal, next goal, reward and coin of transitions ``(rows, steps)`` of ``[N, T]`` episodes.
+        """Relabels transitions ``(rows, steps)`` of ``[N, T]`` episodes as a draw does: their new entries and coin.
 
-        The one relabelling both the replay draw and the trainer's normaliser feed use.
-        ``lengths`` are the valid lengths of ``rows`` (or one length they all share), read from the
-        ``end_key`` flags when omitted; ``generator`` drives the draws (torch's global RNG without one).
+        ``lengths`` (of ``rows``, or one they share) default to the ``end_key`` flags'; ``generator`` to torch's RNG.
         """
         relabel, candidate = self._draw(episodes, rows, steps, generator, lengths)
         flat = torch.add(steps, rows, alpha=episodes.shape[1])
@@ -170,32 +121,51 @@ class HindsightRelabel(SampleUnit):
         return entries
 
     def _relabelled(
-        self, relabel: torch.Tensor, candidate: torch.Tensor, stored_goal: torch.Tensor, next_achieved: torch.Tensor
+        self, relabel: torch.Tensor, candidate: torch.Tensor, stored_goal: torch.Tensor, next_achieved: torch.Tensor,
+        with_success: bool = True,
     ) -> dict[NestedKey, torch.Tensor]:
-        """The goal and reward entries of transitions: ``candidate`` where ``relabel``, else their stored goal.
+        """The goal, reward and success entries of transitions: ``candidate`` where ``relabel``, else their stored goal.
 
-        The one place both consumers (:meth:`relabel` and the buffer's :meth:`collate`) build them.
+        The one place both :meth:`relabel` and the buffer's :meth:`collate` build them.
         """
         goal = torch.where(relabel.unsqueeze(-1), candidate, stored_goal)
         reward = self.reward_fn(next_achieved, goal)
-        entries = {self.goal_key: goal, self.next_goal_key: goal, self.reward_key: reward}
-        if self.success_key is not None:
-            entries[self.success_key] = reward == 0
+        entries = {self.goal_key: goal, next_key(self.goal_key): goal, self.reward_key: reward}
+        if with_success and self.success_key is not None:
+            success = reward == 0
+            if not bool((success | (reward == -1)).all()):
+                raise ValueError(
+                    f"HindsightRelabel writes {self.success_key!r} as reward == 0, right for sparse rewards in "
+                    f"{{-1, 0}} only, but reward_fn gave {reward.unique()[:5].tolist()}: give HindsightRelabel "
+                    "success_key=None (the flag then stays the stored goal's), or a sparse reward_fn"
+                )
+            entries[self.success_key] = success
         return entries
 
     def _draw(
-        self,
-        episodes: TensorDictBase,
-        rows: torch.Tensor,
-        steps: torch.Tensor,
-        generator: torch.Generator | None,
+        self, episodes: TensorDictBase, rows: torch.Tensor, steps: torch.Tensor, generator: torch.Generator | None,
         lengths: torch.Tensor | int | None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The coin of each transition and the achieved goal it takes if the coin says relabel."""
+        """The coin of each transition and the achieved goal it takes if the coin says relabel.
+
+        The goal is ``(*next, achieved_goal_key)[e, j]``, state ``j + 1``: "future" draws ``j`` in ``[t, L - 1]``.
+        """
         if lengths is None:
             lengths = episode_lengths(episodes, self.end_key, rows)
         relabel = torch.rand(steps.shape, generator=generator) < self.future_p
-        goal_steps = self.goal_steps(steps, lengths, generator)
+        last = lengths - 1
+        if self.strategy == "past":
+            goal_steps = steps.clamp(max=last)
+        elif self.strategy == "final":
+            goal_steps = torch.zeros_like(steps).add_(last)
+        else:
+            # A step at or past its episode's end (the normaliser feed reads whole rows) has L - t <= 0: t + offset
+            # stays >= L, and the clamp gives it the episode's last goal, as a clamp of L - t at 0 would.
+            span = lengths if self.strategy == "episode" else lengths - steps
+            goal_steps = torch.rand(steps.shape, generator=generator).mul_(span).long()
+            if self.strategy == "future":
+                goal_steps.add_(steps)
+            goal_steps.clamp_(max=last)
         # A flat view + index_select: much cheaper than 2-D advanced indexing.
         next_achieved = require_key(episodes, self.next_achieved_goal_key, (None,)).flatten(0, 1)
         return relabel, next_achieved.index_select(0, goal_steps.add_(rows, alpha=episodes.shape[1]))
@@ -233,9 +203,7 @@ class HindsightRelabel(SampleUnit):
     def collate(self, data: TensorDictBase) -> TensorDictBase:
         """The buffer's ``collate_fn``: writes the goals and rewards of the last :meth:`expand` into ``data``.
 
-        ``data`` is what the storage read at the drawn ``(episode, step)`` pairs, so its own entries
-        are the stored goal and achieved goal of each transition: :meth:`relabel`'s second and third
-        reads of the storage are not needed here.
+        ``data`` already holds each transition's stored goal and achieved goal: no second read of the storage.
         """
         draw = getattr(self._pending, "draw", None)
         if draw is None:
@@ -245,15 +213,11 @@ class HindsightRelabel(SampleUnit):
             )
         self._pending.draw = None
         self._collated = True
-        relabel, candidate = draw
-        for key, value in self._relabelled(
-            relabel, candidate, data.get(self.goal_key), data.get(self.next_achieved_goal_key)
-        ).items():
-            if key == self.success_key:
-                if key not in data.keys(True, True):  # stored episodes without the flag get none
-                    continue
-                value = value.to(data.get(key).dtype)
-            data.set(key, value)
+        # Stored episodes without the success flag get none.
+        with_success = self.success_key is not None and self.success_key in data.keys(True, True)
+        entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key), with_success)
+        for key, value in entries.items():
+            data.set(key, value.to(data.get(key).dtype) if key == self.success_key else value)
         return data
 
     # A thread-local cannot be pickled; a pending draw belongs to the thread between a buffer's expand and its
@@ -270,6 +234,3 @@ class HindsightRelabel(SampleUnit):
     def __repr__(self) -> str:
         return f"HindsightRelabel(strategy={self.strategy!r}, future_p={self.future_p})"
 
-
-def _at_most(values: torch.Tensor, bound: torch.Tensor | int) -> torch.Tensor:
-    return values.clamp_(max=bound) if isinstance(bound, int) else torch.minimum(values, bound)

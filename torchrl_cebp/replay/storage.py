@@ -143,7 +143,7 @@ class _EpisodeRows:
                 f"episode storages take whole episodes shaped [n_episodes, T], got batch shape {list(data.shape)}: "
                 f"{ASSEMBLE_FRAMES}"
             )
-        require_time_at(data, 1, [buffer.dim_extend for buffer in _upstream.attached_buffers(self)])
+        require_time_at(data, 1, lambda: [buffer.dim_extend for buffer in _upstream.attached_buffers(self)])
         exact = self.initialized and self._check_keys(data)
         ends = end_flags(data, self.end_key)
         counts = None if ends is None else ends.sum(-1)
@@ -306,12 +306,6 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         self.end_key = end_key
         self._layout_source: TensorDictBase | None = None
 
-    def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
-        super().set(cursor, data, set_cursor=set_cursor)
-        if isinstance(data, TensorDictBase):
-            # Laid out once it holds data, not at the first draw: a process it is sent to writes into the same blocks.
-            self._layout()
-
     def _after_load(self) -> None:
         super()._after_load()
         if self.initialized:  # the blocks too: laid out in one process only, the other would write elsewhere
@@ -319,9 +313,13 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
 
     def _store(self, cursor: Any, data: Any, set_cursor: bool, *, exact: bool) -> None:
         # Whole rows of the stored entries, no more and no fewer: one copy per dtype block, where TorchRL's write
-        # copies each entry apart (the most of a write's time).
+        # copies each entry apart (the most of a write's time). Laid out at the first write, not the first draw, so
+        # that a process the storage is sent to writes into the same blocks.
         if not (exact and isinstance(cursor, torch.Tensor) and cursor.ndim == 1 and type(data) is TensorDict):
-            return super()._store(cursor, data, set_cursor, exact=exact)
+            super()._store(cursor, data, set_cursor, exact=exact)
+            if isinstance(data, TensorDictBase):
+                self._layout()
+            return
         self._layout()
         rows = []
         for block, keys in self._row_blocks:

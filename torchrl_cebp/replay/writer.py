@@ -18,22 +18,13 @@ PARTIAL_EPISODES_FILE = "partial_episodes.pt"
 class EpisodeWriter(TensorDictRoundRobinWriter):
     """Writes the episodes a batch of frames completes as ``[episode, t]`` rows; the rest waits for its end.
 
-    A collector yields frames, not episodes: flat ``[frames]`` from one env, ``[envs, frames]``
-    from a batched env, ``[nodes, envs, T]`` stacked, and an episode may run over several batches
-    or end early. Every leading dimension is an env lane and the last one is time (TorchRL's
-    collector and ``rollout`` layout, which names it ``"time"``). Each lane is cut after each
-    ``end_key`` flag; an episode that ends is padded to ``max_episode_steps`` (the storage's row
-    length) and written round-robin, and the frames after a lane's last end wait for the next
-    batch. Frames are matched to the episode they continue by ``traj_key`` (the collector's
-    trajectory ids, so batches of different workers mix safely), else by their lane; they continue
-    it only if their first state is its last next-state (TorchRL's ``step_mdp``), so an episode cut
-    by a reset (a new ``rollout``, a collector's ``reset_at_each_iter``) is dropped, never merged.
-
-    ``rb.extend(batch)`` returns where each frame of ``batch`` was stored: its flat transition
-    index ``row * max_episode_steps + step`` (how TorchRL's prioritized sampler numbers the
-    transitions of an ``ndim=2`` storage), -1 while its episode has not ended. The buffer must
-    extend along dimension 0 (``dim_extend=0``): the writer refuses a batch whose ``"time"``
-    dimension is not its last. ``rb.empty()`` drops the waiting frames too.
+    Every leading dimension of a batch is an env lane and the last one is time (the layout of TorchRL's collectors
+    and ``rollout``, which name it ``"time"``); the buffer must extend along dimension 0 (``dim_extend=0``). Each lane
+    is cut after each ``end_key`` flag; an episode that ends is padded to ``max_episode_steps`` and written
+    round-robin. Frames continue the episode of their ``traj_key`` (else of their lane) only if their first state is
+    its last next-state, so an episode cut by a reset is dropped, never merged. ``rb.extend(batch)`` returns each
+    frame's flat transition index ``row * max_episode_steps + step``, -1 while its episode has not ended; and
+    ``rb.empty()`` drops the waiting frames too. See ``docs/replay.md`` for the layouts it takes.
 
     Args:
         max_episode_steps (int): the storage's row length, the longest episode (``env.max_episode_steps``).
@@ -44,23 +35,14 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
             the writer cannot be shared between processes. Defaults to ``False``.
 
     Examples:
-        >>> from torchrl.collectors import Collector
         >>> from torchrl.data import TensorDictReplayBuffer
         >>> from torchrl_cebp.envs import make_env
         >>> from torchrl_cebp.replay import EpisodeStorage, EpisodeWriter
-        >>> env = make_env("push", seed=0, num_envs=2)
-        >>> collector = Collector(env, None, frames_per_batch=2 * 30, total_frames=-1,
-        ...                       auto_register_policy_transforms=False)
-        >>> rb = TensorDictReplayBuffer(storage=EpisodeStorage(100 * 50), writer=EpisodeWriter(50),
-        ...                             dim_extend=0, batch_size=16)
-        >>> batches = iter(collector)
-        >>> _ = rb.extend(next(batches))  # [2, 30]: two episodes begun, none ended
-        >>> len(rb)
-        0
-        >>> _ = rb.extend(next(batches))  # their last 20 steps, and 10 of the next two
-        >>> rb.storage.shape
-        torch.Size([2, 50])
-        >>> collector.shutdown()
+        >>> frames = make_env("push", seed=0, num_envs=2).rollout(80, break_when_any_done=False)  # 50 steps, then 30
+        >>> rb = TensorDictReplayBuffer(storage=EpisodeStorage(100 * 50), writer=EpisodeWriter(50), dim_extend=0)
+        >>> index = rb.extend(frames)
+        >>> rb.storage.shape, index[:, 48:52].tolist()  # the next episodes' frames wait for their end
+        (torch.Size([2, 50]), [[48, 49, -1, -1], [98, 99, -1, -1]])
     """
 
     def __init__(
@@ -93,16 +75,9 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
             raise
 
     def _extend(self, data: TensorDictBase) -> torch.Tensor:
-        lanes = self._lanes(data)
-        ends = lanes.get(self.end_key, None)
-        if ends is None:
-            raise KeyError(
-                f"EpisodeWriter cuts episodes at {self.end_key!r}, which the batch lacks; "
-                f"present keys: {sorted(map(str, lanes.keys(True, True)))}"
-            )
-        ends = ends.reshape(*lanes.shape, -1).any(-1)
+        lanes, ends = self._lanes(data)
         trajectories = lanes.get(self.traj_key, None)
-        episodes, pieces = [], []  # pieces: (episode, lane, first step, last step + 1, steps before it)
+        episodes, pieces = [], []  # pieces[i]: episodes[i]'s lane, first step, last step + 1, steps before it
         for lane in range(lanes.shape[0]):
             start = 0
             for stop in [*(ends[lane].nonzero().squeeze(-1) + 1).tolist(), lanes.shape[1]]:
@@ -114,9 +89,14 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
                 if before is not None and not _continues(before, segment):
                     before = None  # the env was reset before that episode ended: it never will
                 episode = segment if before is None else torch.cat([before, segment])
-                self._check_length(episode, data.shape)
+                if episode.shape[0] > self.max_episode_steps:
+                    raise ValueError(
+                        f"an episode of the batch of shape {list(data.shape)} runs {episode.shape[0]} steps without "
+                        f"an end flag {self.end_key!r}, more than max_episode_steps={self.max_episode_steps}: give "
+                        "EpisodeWriter the env's episode length, and a batch whose last dimension is time"
+                    )
                 if bool(ends[lane, stop - 1]):
-                    pieces.append((len(episodes), lane, start, stop, 0 if before is None else before.shape[0]))
+                    pieces.append((lane, start, stop, 0 if before is None else before.shape[0]))
                     episodes.append(pad(episode, [0, self.max_episode_steps - episode.shape[0]]))
                 else:  # a copy: a collector may reuse its batch's memory for the next one
                     self._partial[key] = episode.clone()
@@ -124,53 +104,27 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
         positions = torch.full(lanes.shape, -1, dtype=torch.long)
         if episodes:
             rows = super().extend(torch.stack(episodes))[:: self.max_episode_steps, 0]
-            for episode, lane, start, stop, before in pieces:
-                first = rows[episode] * self.max_episode_steps + before
+            for row, (lane, start, stop, before) in zip(rows.tolist(), pieces):
+                first = row * self.max_episode_steps + before
                 positions[lane, start:stop] = torch.arange(first, first + stop - start)
         return positions.reshape(data.shape)
 
-    def _lanes(self, data: TensorDictBase) -> TensorDictBase:
-        """``data`` as ``[lanes, time]``, after checking its time dimension is the last."""
+    def _lanes(self, data: TensorDictBase) -> tuple[TensorDictBase, torch.Tensor]:
+        """``data`` as ``[lanes, time]`` and its ``[lanes, time]`` end flags, once its time is known to be last."""
         storage = getattr(self, "_storage", None)  # None until a buffer registers it
-        dim_extends = [] if storage is None else [b.dim_extend for b in _upstream.attached_buffers(storage)]
-        require_time_at(data, data.ndim - 1, dim_extends)
+        require_time_at(data, data.ndim - 1,
+                        lambda: [] if storage is None else [b.dim_extend for b in _upstream.attached_buffers(storage)])
         lanes = data.unsqueeze(0) if data.ndim == 1 else data.reshape(-1, data.shape[-1])
-        if "time" not in data.names and data.ndim > 1:
-            self._require_time_last(lanes, data.shape)
-        return lanes
-
-    def _require_time_last(self, lanes: TensorDictBase, shape: torch.Size) -> None:
-        """Refuses a batch without dimension names whose frames do not follow each other along its last dimension.
-
-        Within a lane, a frame that does not end its episode is followed by the frame whose state is its next-state;
-        a ``[T, envs]`` batch read as ``[envs, T]`` breaks that at almost every step.
-        """
         ends = lanes.get(self.end_key, None)
-        if ends is None or lanes.shape[1] < 2:  # without its end flags, extend() refuses the batch
-            return
-        following = ~ends.reshape(*lanes.shape, -1).any(-1)[:, :-1]
-        after, before = lanes[:, 1:], lanes[:, :-1].get("next")
-        for key in before.keys(True, True):
-            now = after.get(key, None)
-            if now is None or not torch.is_floating_point(now):
-                continue
-            matches = (now == before.get(key)).reshape(*following.shape, -1).all(-1)
-            if (following & ~matches).any():
-                raise ValueError(
-                    f"the frames of the batch of shape {list(shape)} do not follow each other along its last "
-                    f"dimension ({key!r} differs from the previous frame's next {key!r}): EpisodeWriter reads the "
-                    "last dimension as time. Give the batch time last ([envs, T], e.g. batch.transpose(0, 1)), or "
-                    "name its dimensions as TorchRL's collectors do (names=[..., 'time'])"
-                )
-            return  # one entry present in both tells
-
-    def _check_length(self, episode: TensorDictBase, shape: torch.Size) -> None:
-        if episode.shape[0] > self.max_episode_steps:
-            raise ValueError(
-                f"an episode of the batch of shape {list(shape)} runs {episode.shape[0]} steps without an end "
-                f"flag {self.end_key!r}, more than max_episode_steps={self.max_episode_steps}: give EpisodeWriter "
-                "the env's episode length, and a batch whose last dimension is time"
+        if ends is None:
+            raise KeyError(
+                f"EpisodeWriter cuts episodes at {self.end_key!r}, which the batch lacks; "
+                f"present keys: {sorted(map(str, lanes.keys(True, True)))}"
             )
+        ends = ends.reshape(*lanes.shape, -1).any(-1)
+        if "time" not in data.names and data.ndim > 1:
+            _require_time_last(lanes, ends, data.shape)
+        return lanes, ends
 
     def _empty(self, empty_write_count: bool = True) -> None:
         super()._empty(empty_write_count=empty_write_count)
@@ -200,10 +154,9 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
         }
 
     def __repr__(self) -> str:
-        return (
-            f"EpisodeWriter(max_episode_steps={self.max_episode_steps}, cursor={int(_upstream.writer_position(self)[0])}, "
-            f"partial_episodes={len(self._partial)})"
-        )
+        cursor = int(_upstream.writer_position(self)[0])
+        return (f"EpisodeWriter(max_episode_steps={self.max_episode_steps}, cursor={cursor}, "
+                f"partial_episodes={len(self._partial)})")
 
 
 def _continues(before: TensorDictBase, segment: TensorDictBase) -> bool:
@@ -211,3 +164,25 @@ def _continues(before: TensorDictBase, segment: TensorDictBase) -> bool:
     last, first = before[-1].get("next"), segment[0]
     present = set(first.keys(True, True))
     return all(torch.equal(value, first.get(key)) for key, value in last.items(True, True) if key in present)
+
+
+def _require_time_last(lanes: TensorDictBase, ends: torch.Tensor, shape: torch.Size) -> None:
+    """Refuses an unnamed batch whose frames do not follow each other along its last dimension.
+
+    A ``[T, envs]`` batch read as ``[envs, T]`` breaks the chain of next-states at almost every step.
+    """
+    following = ~ends[:, :-1]
+    after, before = lanes[:, 1:], lanes[:, :-1].get("next")
+    for key in before.keys(True, True):
+        now = after.get(key, None)
+        if now is None or not torch.is_floating_point(now):
+            continue
+        matches = (now == before.get(key)).reshape(*following.shape, -1).all(-1)
+        if (following & ~matches).any():
+            raise ValueError(
+                f"the frames of the batch of shape {list(shape)} do not follow each other along its last "
+                f"dimension ({key!r} differs from the previous frame's next {key!r}): EpisodeWriter reads the "
+                "last dimension as time. Give the batch time last ([envs, T], e.g. batch.transpose(0, 1)), or "
+                "name its dimensions as TorchRL's collectors do (names=[..., 'time'])"
+            )
+        return  # one entry present in both tells

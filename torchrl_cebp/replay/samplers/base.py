@@ -1,12 +1,6 @@
-"""Episode-level prioritised sampling over a ``[episode, t]`` TorchRL storage.
+"""Episode-level prioritised sampling: an episode row by its priority (a sum tree, O(log episodes)), then a step.
 
-Every sampler here draws an *episode row* with probability proportional to a
-priority computed when the episode is written (MEP's ranks also change with
-every write and refit), and then a step inside it. Priorities live in a sum
-segment tree (TorchRL's C++ one), so a draw costs O(batch x log episodes) and
-never rescans the buffer. Episodes may end before
-their row does (an ``("next", "done")`` flag before ``T``): the steps after the
-end are padding, which priorities ignore and draws never return.
+The steps after an episode's end flag are padding: priorities ignore them and draws never return them.
 """
 from __future__ import annotations
 
@@ -175,7 +169,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def __init__(self, end_key: NestedKey = ("next", "done")) -> None:
         self.end_key = end_key
-        self._priorities = torch.zeros(0, dtype=torch.float64)
         self._cumulative_step_weights: torch.Tensor | None = None
         self._tree: SumSegmentTreeFp64 | None = None
         self._n_stored = 0
@@ -218,7 +211,6 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         n_rows = storage.max_size // storage.shape[1]
         if self._tree is None:
             self._tree = SumSegmentTreeFp64(n_rows)
-            self._priorities = torch.zeros(n_rows, dtype=torch.float64)
         elif self._tree.size != n_rows:
             raise ValueError(
                 f"{type(self).__name__} holds priorities for {self._tree.size} episode rows (of another buffer, "
@@ -307,14 +299,23 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         if steps is not None:
             if self._cumulative_step_weights is None:
                 self._cumulative_step_weights = torch.zeros(
-                    self._priorities.numel(), episodes.shape[1], dtype=torch.float64
+                    self._tree.size, episodes.shape[1], dtype=torch.float64
                 )
             self._cumulative_step_weights[rows] = steps.double().cumsum(-1)
         self._n_stored = max(self._n_stored, int(rows.max()) + 1)
 
+    def priorities(self) -> torch.Tensor:
+        """Every row's priority (empty before the first write)."""
+        if self._tree is None:
+            return torch.zeros(0, dtype=torch.float64)
+        return self._leaves(torch.arange(self._tree.size))
+
+    def _leaves(self, rows: torch.Tensor) -> torch.Tensor:
+        # The tree answers a one-element index with a float.
+        return torch.as_tensor(self._tree[rows], dtype=torch.float64).reshape(rows.shape)
+
     def set_priorities(self, rows: torch.Tensor, priority: torch.Tensor) -> None:
         """Overwrites the priorities of ``rows`` (used on write, and by samplers that re-rank)."""
-        self._priorities[rows] = priority
         self._tree[rows] = priority
 
     def _uniform(self, *shape: int) -> torch.Tensor:
@@ -348,7 +349,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
         """Probability of drawing each of ``rows`` under the current priorities."""
-        return self._priorities[rows] / self._tree.query(0, self._tree.size)
+        return self._leaves(rows) / self._tree.query(0, self._tree.size)
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
         self._catch_up(storage)
@@ -367,21 +368,21 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     # ---- state --------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
-        state = {"priorities": self._priorities.clone(), "n_stored": self._n_stored}
+        state = {"priorities": self.priorities(), "n_stored": self._n_stored}
         if self._cumulative_step_weights is not None:
             state["cumulative_step_weights"] = self._cumulative_step_weights.clone()
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         # Older states also carry the valid lengths, which the storage keeps: they are left unread.
-        self._priorities = state_dict["priorities"].clone().to(torch.float64)
+        priorities = state_dict["priorities"].to(torch.float64)
         self._n_stored = int(state_dict["n_stored"])
         steps = state_dict.get("cumulative_step_weights")
         self._cumulative_step_weights = None if steps is None else steps.clone()
         self._tree = None  # a state saved before any write: the tree is made for the storage it meets
-        if self._priorities.numel():
-            self._tree = SumSegmentTreeFp64(self._priorities.numel())
-            self._tree[torch.arange(self._priorities.numel())] = self._priorities
+        if priorities.numel():
+            self._tree = SumSegmentTreeFp64(priorities.numel())
+            self._tree[torch.arange(priorities.numel())] = priorities
         self._seen = None  # the state matches the storage's rows as they are now
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -391,9 +392,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                               for name, value in state.items()})
 
     def _empty(self) -> None:
-        self._priorities.zero_()
         if self._tree is not None:
-            self._tree = SumSegmentTreeFp64(self._priorities.numel())
+            self._tree = SumSegmentTreeFp64(self._tree.size)
         self._cumulative_step_weights = None
         self._n_stored = 0
 

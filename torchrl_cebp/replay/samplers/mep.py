@@ -133,8 +133,8 @@ class MEPSampler(EpisodePrioritySampler):
         if lengths is None:
             lengths = episode_lengths(episodes, self.end_key)
         super().write_priorities(rows, episodes, lengths)
-        if self._scores.numel() != self._priorities.numel():
-            self._scores = torch.zeros_like(self._priorities)
+        if self._scores.numel() != self._tree.size:
+            self._scores = torch.zeros(self._tree.size, dtype=torch.float64)
         if self._mixture is not None:
             valid = valid_steps(lengths, episodes.shape[1])
             raw = self._raw_scores(self._trajectories(episodes, valid))
