@@ -1,0 +1,140 @@
+"""This checkout's replay against another commit's, and against TorchRL's writer, in one process.
+
+Both packages load into one process (the other commit's renamed ``torchrl_cebp_before``), and for each sampler the
+two buffers, filled with the same FetchPush-shaped episodes, take turns: a draw of 256 with 'future' HER
+relabelling, a draw right after a write (what a training loop sees), and the write of one 50-step episode. Taking
+turns puts a shared machine's load drift on both alike. MEP is refitted once after the fill, so that its writes rank
+against a fitted mixture as in training. The last column divides a write by TorchRL's own ``HERReplayBuffer`` write
+of the same episode, timed in the same turns.
+
+    .venv/bin/python benchmarks/replay_versions.py --before 2bcbedd --episodes 20000 --repeats 300
+"""
+from __future__ import annotations
+
+import argparse
+import itertools
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import torch
+from omegaconf import OmegaConf
+
+from _peers import BATCH_SIZE, FUTURE_P, build_torchrl_her, episodes_to_tensordict, make_episodes
+
+ROOT = Path(__file__).resolve().parents[1]
+POOL_EPISODES = 32
+WARMUP = 10
+
+
+def import_commit(commit: str, into: Path):
+    """The package at ``commit``, importable as ``torchrl_cebp_before``."""
+    archive = subprocess.run(["git", "archive", commit, "torchrl_cebp"], cwd=ROOT, capture_output=True, check=True)
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive.stdout, check=True)
+    (into / "torchrl_cebp").rename(into / "torchrl_cebp_before")
+    for source in (into / "torchrl_cebp_before").rglob("*.py"):
+        source.write_text(source.read_text().replace("torchrl_cebp", "torchrl_cebp_before"))
+    sys.path.insert(0, str(into))
+    import torchrl_cebp_before.replay
+
+    return torchrl_cebp_before
+
+
+def sampler_arguments(capacity: int) -> dict[str, tuple[str, dict]]:
+    """Each sampler's class name and arguments, as benchmarks/sampling.py builds them (FetchPush's settings)."""
+    push = OmegaConf.load(ROOT / "conf" / "env" / "push.yaml")
+    workspace = tuple(map(tuple, push.gripper_workspace))
+    return {
+        "uniform": ("UniformEpisodeSampler", {}),
+        "cebp": ("CEBPSampler", {"temperature": push.cebp_temperature}),
+        "cebp_released": ("ReleasedCEBPSampler", {"k": push.cebp_released_k, "workspace": workspace}),
+        "cebp_initial": ("InitialCEBPSampler", {"workspace": workspace}),
+        "cper": ("CPERSampler", {}),
+        "ebp": ("EBPSampler", {}),
+        "mep": ("MEPSampler", {}),
+        "per": ("PERSampler", {"capacity": capacity}),
+    }
+
+
+def reward(achieved: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    return -(torch.linalg.vector_norm(achieved - goal, dim=-1, keepdim=True) > 0.05).float()
+
+
+def build(package, cls_name: str, kwargs: dict, stored, pool) -> tuple[Callable[[], object], Callable[[], object]]:
+    """A filled buffer of ``package``'s: its draw, and a write of the next pool episode."""
+    sampler = getattr(package.replay.samplers, cls_name)(**kwargs)
+    capacity = len(stored) * stored.u.shape[1]
+    her = package.replay.HindsightRelabel(reward, future_p=FUTURE_P, strategy="future")
+    rb = package.replay.make_replay_buffer(sampler, her, capacity=capacity, batch_size=BATCH_SIZE)
+    rb.extend(episodes_to_tensordict(stored))
+    if hasattr(sampler, "refit"):
+        sampler.refit(rb.storage)
+    fresh = itertools.cycle([episodes_to_tensordict(pool.slice(i, i + 1)) for i in range(len(pool))])
+    return rb.sample, lambda: rb.extend(next(fresh))
+
+
+def elapsed_ms(fn: Callable[[], object]) -> float:
+    start = time.perf_counter()
+    fn()
+    return (time.perf_counter() - start) * 1e3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--before", required=True, help="the commit to compare this checkout with")
+    parser.add_argument("--episodes", type=int, default=20000, help="stored 50-step episodes")
+    parser.add_argument("--repeats", type=int, default=300, help="turns of each measurement")
+    parser.add_argument("--samplers", nargs="+", default=None, help="a subset of the samplers (default: all)")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    import torchrl_cebp.replay.samplers  # noqa: F401  (the package's samplers, as the other commit's)
+    import torchrl_cebp
+
+    data = make_episodes(args.episodes + POOL_EPISODES, seed=0)
+    stored, pool = data.slice(0, args.episodes), data.slice(args.episodes, len(data))
+    arguments = sampler_arguments(args.episodes * stored.u.shape[1])
+    names = args.samplers or list(arguments)
+    unknown = sorted(set(names) - set(arguments))
+    if unknown:
+        parser.error(f"unknown samplers {unknown}; known: {sorted(arguments)}")
+    print(f"median ms over {args.repeats} turns, {args.episodes} stored episodes; before = {args.before}, "
+          "after = this checkout; write / TorchRL = this checkout's write over TorchRL's HERReplayBuffer's", flush=True)
+    group = f"{'before':>8s} {'after':>8s} {'ratio':>6s}"
+    header = (f"{'':14s} {'draw':^24s}   {'draw after a write':^24s}   {'write one episode':^24s}   {'write':>9s}\n"
+              f"{'sampler':14s} {group}   {group}   {group}   {'/ TorchRL':>9s}")
+    print(header + "\n" + "-" * len(header.splitlines()[1]), flush=True)
+    with tempfile.TemporaryDirectory() as scratch:
+        before_package = import_commit(args.before, Path(scratch))
+        for name in names:
+            cls_name, kwargs = arguments[name]
+            versions = {"old": build(before_package, cls_name, kwargs, stored, pool),
+                        "new": build(torchrl_cebp, cls_name, kwargs, stored, pool)}
+            _, torchrl_write = build_torchrl_her(stored, pool, WARMUP + 3 * args.repeats)
+            times: dict[str, list[float]] = {f"{v} {m}": [] for v in versions for m in ("draw", "draw after write", "write")}
+            times["torchrl write"] = []
+            for turn in range(WARMUP + args.repeats):
+                for version, (draw, write) in versions.items():
+                    measured = {"draw": elapsed_ms(draw), "write": elapsed_ms(write)}
+                    measured["draw after write"] = elapsed_ms(draw)
+                    if turn >= WARMUP:
+                        for measure, value in measured.items():
+                            times[f"{version} {measure}"].append(value)
+                torchrl_ms = elapsed_ms(torchrl_write)
+                if turn >= WARMUP:
+                    times["torchrl write"].append(torchrl_ms)
+            median = {key: statistics.median(values) for key, values in times.items()}
+            columns = []
+            for measure in ("draw", "draw after write", "write"):
+                old, new = median[f"old {measure}"], median[f"new {measure}"]
+                columns.append(f"{old:8.3f} {new:8.3f} {new / old:6.2f}")
+            print(f"{name:14s} " + "   ".join(columns) + f"   {median['new write'] / median['torchrl write']:8.2f}x",
+                  flush=True)
+            del versions
+
+
+if __name__ == "__main__":
+    main()
