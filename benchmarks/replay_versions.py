@@ -114,7 +114,8 @@ def main() -> None:
             versions = {"old": build(before_package, cls_name, kwargs, stored, pool),
                         "new": build(torchrl_cebp, cls_name, kwargs, stored, pool)}
             _, torchrl_write = build_torchrl_her(stored, pool, WARMUP + 3 * args.repeats)
-            times: dict[str, list[float]] = {f"{v} {m}": [] for v in versions for m in ("draw", "draw after write", "write")}
+            measures = ("draw", "draw after write", "write")
+            times: dict[str, list[float]] = {f"{v} {m}": [] for v in versions for m in measures}
             times["torchrl write"] = []
             for turn in range(WARMUP + args.repeats):
                 for version, (draw, write) in versions.items():
@@ -128,7 +129,7 @@ def main() -> None:
                     times["torchrl write"].append(torchrl_ms)
             median = {key: statistics.median(values) for key, values in times.items()}
             columns = []
-            for measure in ("draw", "draw after write", "write"):
+            for measure in measures:
                 old, new = median[f"old {measure}"], median[f"new {measure}"]
                 columns.append(f"{old:8.3f} {new:8.3f} {new / old:6.2f}")
             print(f"{name:14s} " + "   ".join(columns) + f"   {median['new write'] / median['torchrl write']:8.2f}x",

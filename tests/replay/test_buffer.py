@@ -258,3 +258,8 @@ def test_a_write_that_never_finished_stops_the_draws_with_how_to_recover():
     recovered = EpisodeReplayBuffer(storage=EpisodeStorage(4 * T), dim_extend=0, batch_size=8)
     recovered.load_state_dict(rb.state_dict())
     assert recovered.sample()["observation"].shape == (8, 25)
+
+
+def test_an_unknown_storage_kind_is_refused_with_the_known_ones():
+    with pytest.raises(ValueError, match=r"unknown storage kind 'disk'; valid kinds: \['memmap', 'tensor'\]"):
+        make_replay_buffer(None, HindsightRelabel(sparse_reward), capacity=4 * T, storage="disk")

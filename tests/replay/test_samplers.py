@@ -319,6 +319,32 @@ def test_mep_state_round_trip_keeps_the_ranks_of_later_writes(either_storage):
         MEPSampler().load_state_dict({k: v for k, v in sampler.state_dict().items() if k != "scores"})
 
 
+def test_mep_ranks_after_writes_are_those_of_a_whole_rerank():
+    # Ties, overwrites, a floor at 0 and a skipped row included.
+    sampler = MEPSampler(seed=0)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(12 * T), sampler=sampler, dim_extend=0, batch_size=16)
+    rb.extend(hand_made())
+    sampler.refit(rb.storage)
+    sampler.write_priorities(torch.tensor([8]), hand_made(1, seed=9))  # rows 6 and 7 are stored at score 0 too
+    scores = sampler.state_dict()["scores"][:9].numpy()
+    assert torch.allclose(sampler.priorities()[:9], torch.from_numpy(mep_probabilities(scores)))
+    noise = torch.Generator().manual_seed(0)
+    for i in range(24):
+        episodes = hand_made(1 + i % 3, seed=i)  # the same trajectories as stored: ties
+        if i % 3:
+            episodes["next", "achieved_goal"] += 0.01 * torch.randn(episodes.shape + (3,), generator=noise)
+        if i % 7 == 0:
+            episodes["next", "achieved_goal"] *= 0  # denser than any fitted one: rank 0
+        rb.extend(episodes)
+        whole = MEPSampler(seed=0)
+        whole.load_state_dict(sampler.state_dict())  # ranks its first write from the scores alone
+        whole.write_priorities(torch.tensor([0]), rb.storage.get(torch.tensor([0])))
+        assert torch.equal(whole.priorities(), sampler.priorities())
+    assert sampler.n_episodes == 12
+    scores = sampler.state_dict()["scores"].numpy()
+    assert torch.allclose(sampler.priorities(), torch.from_numpy(mep_probabilities(scores)))
+
+
 def test_per_new_transitions_at_max_priority_then_td_error():
     sampler = PERSampler(50 * T, beta_anneal_draws=4)
     rb = TensorDictReplayBuffer(storage=EpisodeStorage(50 * T), sampler=sampler, dim_extend=0, batch_size=256,

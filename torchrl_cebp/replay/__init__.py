@@ -1,5 +1,5 @@
 """Episode replay: storage of ``[episode, t]`` rows, HER relabelling, and the samplers."""
-from torchrl_cebp.replay.buffer import EpisodeReplayBuffer, episode_storage, make_replay_buffer
+from torchrl_cebp.replay.buffer import EpisodeReplayBuffer, make_replay_buffer
 from torchrl_cebp.replay.episodes import episode_lengths
 from torchrl_cebp.replay.her import HindsightRelabel
 from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage, episode_rows
@@ -14,7 +14,6 @@ __all__ = [
     "HindsightRelabel",
     "episode_lengths",
     "episode_rows",
-    "episode_storage",
     "make_replay_buffer",
     "replay_cat_tensors",
 ]

@@ -16,45 +16,12 @@ from torchrl_cebp.replay.samplers import PERSampler, UniformEpisodeSampler
 from torchrl_cebp.replay.storage import EpisodeMemmapStorage, EpisodeStorage
 
 
-def episode_storage(
-    capacity: int = 1_000_000,
-    *,
-    kind: Literal["tensor", "memmap"] = "tensor",
-    scratch_dir: str | None = None,
-    device: torch.device | str = "cpu",
-) -> EpisodeStorage | EpisodeMemmapStorage:
-    """An empty episode storage by ``kind``: ``"tensor"`` (in memory) or ``"memmap"`` (on disk, in ``scratch_dir``).
-
-    Args:
-        capacity (int, optional): the storage size in transitions (see :func:`~torchrl_cebp.replay.episode_rows`).
-            Defaults to ``1_000_000``.
-
-    Keyword Args:
-        kind (str, optional): ``"tensor"`` or ``"memmap"``. Defaults to ``"tensor"``.
-        scratch_dir (str, optional): the folder of a ``"memmap"`` storage's files. Defaults to ``None``
-            (temporary files).
-        device (torch.device or str, optional): where the storage keeps its data. Defaults to ``"cpu"``.
-
-    Examples:
-        >>> episode_storage(1000).ndim
-        2
-    """
-    if kind == "tensor":
-        return EpisodeStorage(capacity, device=device)
-    if kind == "memmap":
-        return EpisodeMemmapStorage(capacity, scratch_dir=scratch_dir, device=device)
-    raise ValueError(f"unknown storage kind {kind!r}; valid kinds: ['memmap', 'tensor']")
-
-
 class EpisodeReplayBuffer(TensorDictReplayBuffer):
     """A :class:`~torchrl.data.TensorDictReplayBuffer` whose draws read one version of each drawn episode.
 
-    Another process may overwrite a shared episode storage's rows while this one draws. A draw during
-    which a write ran (the storage's ``write_counts``) is drawn again: the priority, the valid length and
-    the data of each drawn transition then come from the same write, and no padding step is returned
-    (a plain :class:`~torchrl.data.TensorDictReplayBuffer` over the storage does not draw again). If the
-    count shows one write running for ``write_timeout_s`` (30 s) of redraws, it raises a ``RuntimeError``: a
-    write that never ends is one whose process died.
+    A draw during which another process wrote into the shared episode storage (its ``write_counts``) is drawn
+    again, so that the priority, valid length and data of each drawn transition come from one write. A write seen
+    running for ``write_timeout_s`` (30 s) of redraws raises a ``RuntimeError``: its process died.
 
     Args:
         **kwargs: the arguments of :class:`~torchrl.data.TensorDictReplayBuffer`, unchanged.
@@ -127,8 +94,9 @@ def make_replay_buffer(
         capacity (int, optional): the storage size in transitions; a PERSampler's ``max_size`` must equal it.
             Defaults to ``1_000_000``.
         batch_size (int, optional): transitions per ``rb.sample()``. Defaults to ``256``.
-        storage (str, optional): ``"tensor"`` or ``"memmap"`` (see :func:`episode_storage`). Defaults to ``"tensor"``.
-        scratch_dir (str, optional): the folder of a ``"memmap"`` storage's files. Defaults to ``None``.
+        storage (str, optional): ``"tensor"`` (an :class:`~torchrl_cebp.replay.EpisodeStorage`, in memory) or
+            ``"memmap"`` (an :class:`~torchrl_cebp.replay.EpisodeMemmapStorage`, on disk). Defaults to ``"tensor"``.
+        scratch_dir (str, optional): the folder of a ``"memmap"`` storage's files. Defaults to ``None`` (temporary).
         device (torch.device or str, optional): where the storage keeps its data. Defaults to ``"cpu"``.
         transform (Transform, optional): applied to each relabelled batch. Defaults to ``None``.
         generator (torch.Generator, optional): drives every random draw of a sample, the sampler's and HER's.
@@ -144,24 +112,21 @@ def make_replay_buffer(
         >>> from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
         >>> from torchrl_cebp.replay.samplers import CEBPSampler
         >>> reward = lambda ag, g: -(torch.linalg.vector_norm(ag - g, dim=-1, keepdim=True) > 0.05).float()
-        >>> n, T = 4, 50
-        >>> step = {"observation": torch.rand(n, T, 25), "achieved_goal": torch.rand(n, T, 3),
-        ...         "desired_goal": torch.rand(n, T, 3), "touch": torch.rand(n, T, 2)}
-        >>> episodes = TensorDict({**step, "action": torch.rand(n, T, 4),
-        ...     "next": {**step, "reward": torch.zeros(n, T, 1)}}, [n, T])
-        >>> rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(reward), capacity=100 * T, batch_size=32)
-        >>> _ = rb.extend(episodes)
+        >>> step = {"achieved_goal": torch.rand(4, 50, 3), "desired_goal": torch.rand(4, 50, 3)}
+        >>> rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(reward), capacity=100 * 50, batch_size=32)
+        >>> _ = rb.extend(TensorDict({**step, "next": {**step, "touch": torch.rand(4, 50, 2)}}, [4, 50]))
         >>> batch = rb.sample()
         >>> batch["index"].shape, batch["priority_weight"].shape
         (torch.Size([32, 2]), torch.Size([32]))
     """
+    if storage not in ("tensor", "memmap"):
+        raise ValueError(f"unknown storage kind {storage!r}; valid kinds: ['memmap', 'tensor']")
     sampler = UniformEpisodeSampler() if sampler is None else sampler
     if isinstance(sampler, PERSampler) and sampler.max_size != capacity:
-        raise ValueError(
-            f"PERSampler capacity ({sampler.max_size}) must equal the buffer capacity ({capacity})"
-        )
+        raise ValueError(f"PERSampler capacity ({sampler.max_size}) must equal the buffer capacity ({capacity})")
     return EpisodeReplayBuffer(
-        storage=episode_storage(capacity, kind=storage, scratch_dir=scratch_dir, device=device),
+        storage=EpisodeStorage(capacity, device=device) if storage == "tensor" else
+        EpisodeMemmapStorage(capacity, scratch_dir=scratch_dir, device=device),
         sampler=sampler,
         sample_unit=her,
         collate_fn=her.collate,

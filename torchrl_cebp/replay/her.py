@@ -24,13 +24,9 @@ class HindsightRelabel(SampleUnit):
     Give one instance to a stock :class:`~torchrl.data.TensorDictReplayBuffer` over an episode storage (``ndim=2``)
     twice: as its ``sample_unit`` (it sees the drawn ``(episode, step)`` pairs and the storage) and as its
     ``collate_fn`` (it writes the new goals and rewards into the batch, before the transforms). Any sampler works,
-    ours or TorchRL's. For each transition ``(e, t)`` a coin with probability ``future_p`` decides whether to
-    relabel; the new goal is the achieved goal of a next-state of the episode, within its valid length ``L``
-    (up to its first ``end_key`` flag): ``"future"`` a strictly later one, ``t + 1 + floor(U * (L - t))``
-    (baselines' HER); ``"final"`` the last; ``"episode"`` any; ``"past"`` (CPER's draw) that of the drawn step
-    ``t``, for an earlier transition ``floor(U * t)`` replayed instead, so a sampler's weights pick goals. The coin
-    and goals draw from the buffer's generator, whose state ``rb.state_dict()`` keeps. ``docs/replay.md`` compares
-    it with :class:`torchrl.data.HERReplayBuffer`.
+    ours or TorchRL's. A coin of probability ``future_p`` per transition decides whether to relabel; the new goal is
+    an achieved goal of the episode's valid steps, chosen by ``strategy`` (``docs/replay.md`` lists them, and compares
+    this with :class:`torchrl.data.HERReplayBuffer`). Coins and goals draw from the buffer's generator.
 
     Args:
         reward_fn (Callable[[torch.Tensor, torch.Tensor], torch.Tensor]): vectorised sparse reward,
@@ -75,16 +71,10 @@ class HindsightRelabel(SampleUnit):
     """
 
     def __init__(
-        self,
-        reward_fn: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
-        *,
-        future_p: float = 0.8,
-        strategy: Literal["future", "final", "episode", "past"] = "future",
-        goal_key: NestedKey = "desired_goal",
-        achieved_goal_key: NestedKey = "achieved_goal",
-        reward_key: NestedKey = ("next", "reward"),
-        end_key: NestedKey = ("next", "done"),
-        relabelled_key: NestedKey | None = "her_relabelled",
+        self, reward_fn: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], *, future_p: float = 0.8,
+        strategy: Literal["future", "final", "episode", "past"] = "future", goal_key: NestedKey = "desired_goal",
+        achieved_goal_key: NestedKey = "achieved_goal", reward_key: NestedKey = ("next", "reward"),
+        end_key: NestedKey = ("next", "done"), relabelled_key: NestedKey | None = "her_relabelled",
         success_key: NestedKey | None = ("next", "is_success"),
     ) -> None:
         if strategy not in STRATEGIES:

@@ -4,7 +4,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 from multiprocessing.context import get_spawning_popen
-from typing import Any
+from typing import Any, NamedTuple
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -24,15 +24,12 @@ ASSEMBLE_FRAMES = (
 def episode_rows(capacity: int, episode_steps: int) -> int:
     """Rows an episode storage holds for episodes of a given length.
 
-    TorchRL rounds up (a ``LazyTensorStorage`` with ``ndim=2`` allocates ``ceil(capacity / T)`` rows and
-    raises its ``max_size`` to match), so 1e6 transitions of 70-step episodes are 14,286 rows.
+    ``ceil(capacity / T)``: TorchRL's ``LazyTensorStorage`` with ``ndim=2`` rounds up to whole rows, and raises its
+    ``max_size`` to match.
 
     Args:
         capacity (int): the storage size in transitions.
         episode_steps (int): ``T``, the steps of each episode row.
-
-    Returns:
-        ``ceil(capacity / episode_steps)``.
 
     Example:
         >>> episode_rows(1_000_000, 50), episode_rows(1_000_000, 70)
@@ -57,7 +54,7 @@ class _EpisodeRows:
 
     @property
     def write_counts(self) -> torch.Tensor | None:
-        """Each row's write count, then the count of write starts and ends (odd while one runs); ``None`` while empty."""
+        """Each row's write count, then the count of write starts and ends (odd while one runs); ``None`` if empty."""
         if self.initialized:
             self._read_lengths_if_unknown()
         return self._write_counts
@@ -242,29 +239,30 @@ class _EpisodeRows:
         self.max_size = rows * row_length
 
 
+class _Layout(NamedTuple):
+    """What a draw reads the transition-major blocks with, for the stored tensordict ``source`` it replaced."""
+
+    source: TensorDictBase
+    blocks: list[tuple[torch.Tensor, list[int]]]  # per dtype: ``[rows * T, width]`` and its entries' widths
+    row_blocks: list[tuple[torch.Tensor, list[tuple[str, ...]]]]  # per dtype: ``[rows, T, width]`` and its keys
+    plan: list[tuple]  # how the gathered columns nest (_read_plan)
+    n_nodes: int
+    row_length: int  # TorchRL's storage.shape recomputes the filled rows on every read (~10% of a draw of 256)
+
+
 @dataclass(frozen=True)
 class _Field:
-    key: NestedKey
+    path: tuple[str, ...]  # the entry's key
     dtype: torch.dtype
-    start: int
+    start: int  # its columns in its dtype's block
     stop: int
-    shape: torch.Size  # per-transition shape
-
-    @property
-    def path(self) -> tuple[str, ...]:
-        return (self.key,) if isinstance(self.key, str) else tuple(self.key)
-
-    def from_columns(self, columns: torch.Tensor) -> torch.Tensor:
-        """The entry from its ``[B, width]`` columns (a view; no reshape for vector entries)."""
-        return columns if len(self.shape) == 1 else _reshaped(columns, self.shape)
+    shape: torch.Size  # per transition
 
 
 def _is_pair_index(index: Any) -> bool:
     # Spelled out rather than all(...) over the pair: a generator costs a microsecond per draw.
-    if not (isinstance(index, tuple) and len(index) == 2):
-        return False
-    rows, steps = index
-    return isinstance(rows, torch.Tensor) and isinstance(steps, torch.Tensor) and rows.ndim == 1 and steps.ndim == 1
+    return (isinstance(index, tuple) and len(index) == 2 and isinstance(index[0], torch.Tensor)
+            and isinstance(index[1], torch.Tensor) and index[0].ndim == 1 and index[1].ndim == 1)
 
 
 class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
@@ -296,15 +294,11 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
     """
 
     def __init__(
-        self,
-        capacity: int = 1_000_000,
-        *,
-        device: torch.device | str = "cpu",
-        end_key: NestedKey = ("next", "done"),
+        self, capacity: int = 1_000_000, *, device: torch.device | str = "cpu", end_key: NestedKey = ("next", "done")
     ) -> None:
         super().__init__(int(capacity), ndim=2, device=device)
         self.end_key = end_key
-        self._layout_source: TensorDictBase | None = None
+        self._laid_out: _Layout | None = None  # made at the first write, again when the storage is replaced
 
     def _after_load(self) -> None:
         super()._after_load()
@@ -322,7 +316,7 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             return
         self._layout()
         rows = []
-        for block, keys in self._row_blocks:
+        for block, keys in self._laid_out.row_blocks:
             parts = [data.get(key).reshape(*data.shape, -1) for key in keys]
             rows.append((block, parts[0] if len(parts) == 1 else torch.cat(parts, dim=-1)))
         _upstream.record_write(self, cursor, data, set_cursor)
@@ -334,20 +328,18 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         if get_spawning_popen() is None:
             # A copy (deepcopy, pickle) copies each entry apart from the blocks it was a view of: the copy lays
             # its entries out again. Sent to a spawned process, both stay views of the same shared memory.
-            state = {**state, "_layout_source": None}
-            for cache in ("_blocks", "_row_blocks", "_plan", "_n_nodes", "_row_length"):
-                state.pop(cache, None)
+            state = {**state, "_laid_out": None}
         return state
 
-    def _layout(self) -> tuple[list[tuple[torch.Tensor, list[int]]], list[tuple], int]:
-        """The flat dtype blocks with their entries' widths, and the read plan; rebuilt when the storage is replaced."""
-        if self._layout_source is not _upstream.stored_tensordict(self):
+    def _layout(self) -> _Layout:
+        if self._laid_out is None or self._laid_out.source is not _upstream.stored_tensordict(self):
             storage = _upstream.stored_tensordict(self)
             fields, widths = [], {}
             for key, leaf in storage.items(True, True):
                 width = leaf[0, 0].numel()
                 start = widths.get(leaf.dtype, 0)
-                fields.append(_Field(key, leaf.dtype, start, start + width, leaf.shape[2:]))
+                path = (key,) if isinstance(key, str) else tuple(key)
+                fields.append(_Field(path, leaf.dtype, start, start + width, leaf.shape[2:]))
                 widths[leaf.dtype] = start + width
             rows, steps = storage.shape
             blocks = {
@@ -357,36 +349,33 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             packed = TensorDict(batch_size=storage.shape, device=storage.device)
             filled = self.shape[0]  # only these are copied: the rest of the blocks' memory stays untouched
             for field in fields:
-                view = field.from_columns(blocks[field.dtype][..., field.start : field.stop])
-                view[:filled].copy_(storage.get(field.key)[:filled])
-                packed.set(field.key, view)
+                view = blocks[field.dtype][..., field.start : field.stop]  # no reshape for a vector entry
+                view = view if len(field.shape) == 1 else _reshaped(view, field.shape)
+                view[:filled].copy_(storage.get(field.path)[:filled])
+                packed.set(field.path, view)
             _upstream.replace_stored_tensordict(self, packed)
-            self._layout_source = packed
-            self._blocks = [
-                (block.flatten(0, 1), [f.stop - f.start for f in fields if f.dtype == dtype])
-                for dtype, block in blocks.items()
-            ]
-            self._row_blocks = [(block, [f.key for f in fields if f.dtype == dtype]) for dtype, block in blocks.items()]
-            self._plan, self._n_nodes = _read_plan(fields)
-            self._row_length = steps  # storage.shape is recomputed on every read (~10% of a draw of 256)
-        return self._blocks, self._plan, self._n_nodes
+            self._laid_out = _Layout(
+                packed, [(block.flatten(0, 1), [f.stop - f.start for f in fields if f.dtype == dtype])
+                         for dtype, block in blocks.items()],
+                [(block, [f.path for f in fields if f.dtype == dtype]) for dtype, block in blocks.items()],
+                *_read_plan(fields), steps)
+        return self._laid_out
 
     def get(self, index: Any) -> Any:
         if self.initialized and _is_pair_index(index):
-            blocks, plan, n_nodes = self._layout()
-            flat = torch.add(index[1], index[0], alpha=self._row_length)
+            _, blocks, _, plan, n_nodes, row_length = self._layout()
+            flat = torch.add(index[1], index[0], alpha=row_length)
             # One gather per dtype block; split() cuts out all of its entries in one call (a slice each costs twice).
             columns = [c for block, widths in blocks for c in block.index_select(0, flat).split(widths, dim=1)]
             return self._assembled(columns, plan, n_nodes, flat.shape)
         if self.initialized and isinstance(index, slice) and index.step in (None, 1):
             # Consecutive rows (what a sampler reads after a write) as views of the blocks, without TorchRL's
             # per-entry indexing of the stored tensordict.
-            blocks, plan, n_nodes = self._layout()
+            _, blocks, _, plan, n_nodes, steps = self._layout()
             first, stop, _ = index.indices(self.shape[0])
             stop = max(stop, first)
-            steps = self._row_length
-            columns = [c for block, widths in blocks
-                       for c in block[first * steps : stop * steps].unflatten(0, (stop - first, steps)).split(widths, -1)]
+            rows = [block[first * steps : stop * steps].unflatten(0, (stop - first, steps)) for block, _ in blocks]
+            columns = [c for row, (_, widths) in zip(rows, blocks) for c in row.split(widths, -1)]
             return self._assembled(columns, plan, n_nodes, torch.Size([stop - first, steps]))
         return super().get(index)
 
@@ -450,10 +439,8 @@ class EpisodeMemmapStorage(_EpisodeRows, LazyMemmapStorage):
         capacity (int, optional): as for :class:`EpisodeStorage`. Defaults to ``1_000_000``.
 
     Keyword Args:
-        scratch_dir (str, optional): the folder of the memory-mapped files. Defaults to ``None``
-            (temporary files, as for :class:`~torchrl.data.LazyMemmapStorage`).
-        device (torch.device or str, optional): as for :class:`EpisodeStorage`. Defaults to ``"cpu"``.
-        end_key (NestedKey, optional): as for :class:`EpisodeStorage`. Defaults to ``("next", "done")``.
+        scratch_dir (str, optional): the folder of the memory-mapped files. Defaults to ``None`` (temporary files).
+        device, end_key: as for :class:`EpisodeStorage`.
 
     Examples:
         >>> import torch, tempfile
@@ -468,11 +455,7 @@ class EpisodeMemmapStorage(_EpisodeRows, LazyMemmapStorage):
     """
 
     def __init__(
-        self,
-        capacity: int = 1_000_000,
-        *,
-        scratch_dir: str | None = None,
-        device: torch.device | str = "cpu",
+        self, capacity: int = 1_000_000, *, scratch_dir: str | None = None, device: torch.device | str = "cpu",
         end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(int(capacity), ndim=2, scratch_dir=scratch_dir, device=device)

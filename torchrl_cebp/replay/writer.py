@@ -46,12 +46,8 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
     """
 
     def __init__(
-        self,
-        max_episode_steps: int,
-        *,
-        end_key: NestedKey = ("next", "done"),
-        traj_key: NestedKey = ("collector", "traj_ids"),
-        compilable: bool = False,
+        self, max_episode_steps: int, *, end_key: NestedKey = ("next", "done"),
+        traj_key: NestedKey = ("collector", "traj_ids"), compilable: bool = False,
     ) -> None:
         super().__init__(compilable=compilable)
         self.max_episode_steps = int(max_episode_steps)

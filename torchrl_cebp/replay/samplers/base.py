@@ -50,9 +50,7 @@ def require_key(
     if value.ndim != 2 + len(trailing_shape) or any(
         want is not None and got != want for got, want in zip(value.shape[2:], trailing_shape)
     ):
-        raise ValueError(
-            f"key {key!r} has shape {list(value.shape)}, expected {_shape_text(trailing_shape)}"
-        )
+        raise ValueError(f"key {key!r} has shape {list(value.shape)}, expected {_shape_text(trailing_shape)}")
     return value
 
 
@@ -138,11 +136,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     """Base class: draws an episode row by a per-episode priority, then a valid step of it.
 
     Subclasses implement :meth:`episode_priority`, and may override :meth:`step_weights` and
-    :meth:`importance_weights`. Priorities live in TorchRL's sum segment tree, so a draw costs
-    O(batch x log episodes). The sampler scores the rows whose write count changed since it last
-    looked, at each write its buffer tells it of and at each draw, whichever process wrote them
-    (an episode storage's shared ``write_counts``; over TorchRL's ``LazyTensorStorage(ndim=2)`` it
-    counts the writes it is told of itself).
+    :meth:`importance_weights`. At each write and each draw the sampler scores the rows whose write count changed,
+    whichever process wrote them (an episode storage's ``write_counts``; over TorchRL's ``LazyTensorStorage(ndim=2)``
+    it counts the writes its buffer tells it of).
 
     Args:
         end_key (NestedKey, optional): the flag that ends an episode before its row does.
@@ -298,9 +294,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         steps = self.step_weights(episodes, valid)
         if steps is not None:
             if self._cumulative_step_weights is None:
-                self._cumulative_step_weights = torch.zeros(
-                    self._tree.size, episodes.shape[1], dtype=torch.float64
-                )
+                self._cumulative_step_weights = torch.zeros(self._tree.size, episodes.shape[1], dtype=torch.float64)
             self._cumulative_step_weights[rows] = steps.double().cumsum(-1)
         self._n_stored = max(self._n_stored, int(rows.max()) + 1)
 
@@ -325,9 +319,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         """Episode rows drawn proportionally to their priority (O(batch x log rows))."""
         total = self._tree.query(0, self._tree.size)
         if not total > 0:
-            raise RuntimeError(
-                f"{type(self).__name__}: every stored episode has priority 0, nothing to draw"
-            )
+            raise RuntimeError(f"{type(self).__name__}: every stored episode has priority 0, nothing to draw")
         mass = self._uniform(batch_size) * total
         rows = self._tree.scan_lower_bound(mass)
         # Float round-off at the very top of the range can land past the last stored row.

@@ -1,9 +1,4 @@
-"""Contact Energy Based Prioritization (CEBP): the paper's equations, the released code's and the Initial commit's.
-
-Three formulas of one idea (the paper's equations, its released code, and that code's first commit), one class
-each, over a shared base that reads the touch, the object's displacement and (for the code's forms) the gripper's
-workspace mask.
-"""
+"""Contact Energy Based Prioritization (CEBP): the paper's equations, its released code and that code's first commit."""
 from __future__ import annotations
 
 from typing import Any
@@ -12,35 +7,24 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
-from torchrl_cebp.replay.samplers.base import (
-    FLOAT32_EPS,
-    EpisodePrioritySampler,
-    batch_normalised_weights,
-    checked,
-    episode_positions,
-    require_key,
-)
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION
+from torchrl_cebp.replay.samplers.base import (FLOAT32_EPS, EpisodePrioritySampler, batch_normalised_weights, checked,
+                                               episode_positions, require_key)
 
 # A gripper workspace box: (min xyz, max xyz). The per-task boxes are the env configs' ``gripper_workspace``.
 Workspace = tuple[tuple[float, float, float], tuple[float, float, float]]
-# The code's forms use no IS correction until this many episodes are stored.
-CODE_MIN_EPISODES_FOR_WEIGHTS = 256
-INITIAL_BETA = 0.7
 
 
 class _ContactEnergySampler(EpisodePrioritySampler):
     """What every CEBP form reads from an episode: touch, object displacement, and the gripper's workspace mask."""
 
+    # The code's forms use no IS correction until this many episodes are stored; the paper's from the start.
+    _warmup_episodes = 256
+
     def __init__(
-        self,
-        *,
-        workspace: Workspace | None = None,
-        touch_key: NestedKey = ("next", "touch"),
-        position_key: NestedKey = "achieved_goal",
-        next_position_key: NestedKey = ("next", "achieved_goal"),
-        next_observation_key: NestedKey | None = ("next", "observation"),
-        end_key: NestedKey = ("next", "done"),
+        self, *, workspace: Workspace | None = None, touch_key: NestedKey = ("next", "touch"),
+        position_key: NestedKey = "achieved_goal", next_position_key: NestedKey = ("next", "achieved_goal"),
+        next_observation_key: NestedKey | None = ("next", "observation"), end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(end_key)
         self.touch_key = touch_key
@@ -75,65 +59,45 @@ class _ContactEnergySampler(EpisodePrioritySampler):
         low, high = (torch.tensor(corner, dtype=torch.float64) for corner in self.workspace)
         return ((gripper >= low) & (gripper <= high)).all(-1)
 
-    @staticmethod
-    def _code_weights(probabilities: torch.Tensor, n_episodes: int, beta: float) -> torch.Tensor:
-        # The published code's rule: ones during warm-up, then the paper's weights.
-        if n_episodes < CODE_MIN_EPISODES_FOR_WEIGHTS:
+    def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
+        if n_episodes < self._warmup_episodes:
             return torch.ones_like(probabilities)
-        return batch_normalised_weights(probabilities, n_episodes, beta)
+        return batch_normalised_weights(probabilities, n_episodes, self.beta)
 
 
 class CEBPSampler(_ContactEnergySampler):
-    """CEBP as in the paper's equations: episodes drawn by their smoothed contact energy.
+    """CEBP as in the paper's equations: episodes drawn by the sum over steps of a sigmoid of their contact energy.
 
-    Per step ``c(t) = sum_{i<=t} (f_l + f_r)(i) * ||d(i) - d(i-1)||`` (touch on both fingers
-    times the object's displacement), smoothed to ``k / (1 + exp(-temperature * c(t)))``; the
-    episode's priority is the sum over ``t``; IS weights ``(N p(e))^-beta`` over the batch maximum.
-    For ``c >= 0`` the sigmoid lies in ``[k/2, k)``, so priorities differ at most 2x.
-
-    Touch is only used here, to prioritise replay: the policy never sees it.
+    The formulas of the three CEBP forms are in ``docs/samplers.md``. Only replay reads the touch, never the policy.
 
     Args:
         scale (float, optional): the sigmoid's ``k``. Defaults to ``100.0``, the paper's.
-        temperature (float, optional): the sigmoid's ``T``: the paper's 0.01, and 5 for Slide (the env config's
-            ``cebp_temperature``). Defaults to ``0.01``.
+        temperature (float, optional): the sigmoid's ``T`` (the env's ``cebp_temperature``). Defaults to ``0.01``.
         beta (float, optional): the IS exponent. Defaults to ``1.0``.
-        touch_key (NestedKey, optional): the touch of both finger pads, ``[T, 2]``. Defaults to ``("next", "touch")``.
-        position_key (NestedKey, optional): the object's position before each step, ``[T, 3]``.
-            Defaults to ``"achieved_goal"``.
-        next_position_key (NestedKey, optional): the object's position after each step, ``[T, 3]``.
-            Defaults to ``("next", "achieved_goal")``.
-        end_key (NestedKey, optional): the flag that ends an episode before its row does.
-            Defaults to ``("next", "done")``.
+        touch_key (NestedKey, optional): both finger pads' touch, ``[T, 2]``. Defaults to ``("next", "touch")``.
+        position_key (NestedKey, optional): the object's position before a step. Defaults to ``"achieved_goal"``.
+        next_position_key (NestedKey, optional): its position after a step. Defaults to ``("next", "achieved_goal")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
         >>> from torchrl_cebp.replay.samplers import CEBPSampler
-        >>> T = 50
-        >>> episodes = TensorDict({
-        ...     "achieved_goal": torch.zeros(4, T, 3),
-        ...     "next": {"achieved_goal": torch.rand(4, T, 3), "touch": torch.rand(4, T, 2),
-        ...              "observation": torch.rand(4, T, 25)}}, [4, T])
-        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * T, ndim=2),
-        ...                             sampler=CEBPSampler(temperature=0.01), batch_size=8, dim_extend=0)
-        >>> _ = rb.extend(episodes)
-        >>> batch = rb.sample()
-        >>> batch["priority_weight"].shape
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * 50, ndim=2), sampler=CEBPSampler(),
+        ...                             batch_size=8, dim_extend=0)
+        >>> _ = rb.extend(TensorDict({"achieved_goal": torch.zeros(4, 50, 3), "next": {
+        ...     "achieved_goal": torch.rand(4, 50, 3), "touch": torch.rand(4, 50, 2)}}, [4, 50]))
+        >>> rb.sample()["priority_weight"].shape
         torch.Size([8])
     """
 
+    _warmup_episodes = 0
+
     def __init__(
-        self,
-        *,
-        scale: float = 100.0,
-        temperature: float = 0.01,
-        beta: float = 1.0,
-        touch_key: NestedKey = ("next", "touch"),
-        position_key: NestedKey = "achieved_goal",
-        next_position_key: NestedKey = ("next", "achieved_goal"),
-        end_key: NestedKey = ("next", "done"),
+        self, *, scale: float = 100.0, temperature: float = 0.01, beta: float = 1.0,
+        touch_key: NestedKey = ("next", "touch"), position_key: NestedKey = "achieved_goal",
+        next_position_key: NestedKey = ("next", "achieved_goal"), end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(touch_key=touch_key, position_key=position_key, next_position_key=next_position_key,
                          next_observation_key=None, end_key=end_key)
@@ -146,51 +110,38 @@ class CEBPSampler(_ContactEnergySampler):
         energy = torch.cumsum(self._touch(episodes, valid) * distance, dim=1)
         return (self.scale * torch.sigmoid(self.temperature * energy) * valid).sum(1)
 
-    def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
-        return batch_normalised_weights(probabilities, n_episodes, self.beta)
-
     def __repr__(self) -> str:
-        return (
-            f"CEBPSampler(scale={self.scale}, temperature={self.temperature}, "
-            f"beta={self.beta}, n_episodes={self.n_episodes})"
-        )
+        return (f"CEBPSampler(scale={self.scale}, temperature={self.temperature}, beta={self.beta}, "
+                f"n_episodes={self.n_episodes})")
 
 
 class ReleasedCEBPSampler(_ContactEnergySampler):
-    """CEBP as in the released code (HER_force's "ICRA submission" commit).
-
-    A 3-vector ``E(t) = cumsum(displacement * (f_l + f_r))`` zeroed while the gripper is outside
-    the task's workspace box, ``x(t) = sum(E(t)) * ||displacement||``, the centred sigmoid
-    ``100 / (1 + exp(-k x)) - 50``, priority ``sum_t |s(t)| + eps``; IS weights ``(N p)^-1`` over the
-    batch maximum, all ones while fewer than 256 episodes are stored.
+    """CEBP as in the released code (HER_force's "ICRA submission" commit): a centred sigmoid of the contact energy
+    in the gripper's workspace box; IS weights of exponent 1, all ones below 256 stored episodes.
 
     Args:
-        k (float, optional): the sigmoid's slope: the code's 0.1, and 0.05 for Slide (the env config's
-            ``cebp_released_k``). Defaults to ``0.1``.
+        k (float, optional): the sigmoid's slope (the env's ``cebp_released_k``). Defaults to ``0.1``, the code's.
         workspace (tuple of two (x, y, z) tuples, optional): the gripper's box ``((min x, y, z), (max x, y, z))``
-            (the env config's ``gripper_workspace``); touch outside it does not count. Defaults to ``None``, no mask.
-        touch_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "touch")``.
-        position_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``"achieved_goal"``.
-        next_position_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "achieved_goal")``.
+            (the env config's ``gripper_workspace``); touch outside it does not count. Defaults to ``None``, no box.
+        touch_key, position_key, next_position_key, end_key (NestedKey, optional): as :class:`CEBPSampler`.
         next_observation_key (NestedKey, optional): the next observation, which holds the gripper's position at
             ``FETCH_OBSERVATION.gripper_position``. Defaults to ``("next", "observation")``.
-        end_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl_cebp.replay.samplers import ReleasedCEBPSampler
-        >>> T = 50
-        >>> grip = torch.tensor([1.2, 0.6, 0.5] + [0.0] * 22)  # inside Push's workspace box
-        >>> episodes = TensorDict({
-        ...     "achieved_goal": torch.zeros(2, T, 3),
-        ...     "next": {"achieved_goal": torch.rand(2, T, 3), "touch": torch.rand(2, T, 2),
-        ...              "observation": torch.stack([grip.expand(T, 25), -grip.expand(T, 25)])}}, [2, T])
-        >>> push_box = ((1.05, 0.4, 0.4), (1.55, 1.11, float("inf")))  # conf/env/push.yaml's gripper_workspace
-        >>> priority = ReleasedCEBPSampler(k=0.1, workspace=push_box).episode_priority(episodes, torch.ones(2, T, dtype=torch.bool))
+        >>> grip = torch.tensor([1.2, 0.6, 0.5] + [0.0] * 22)  # inside the box below
+        >>> episodes = TensorDict({"achieved_goal": torch.zeros(2, 50, 3), "next": {
+        ...     "achieved_goal": torch.rand(2, 50, 3), "touch": torch.rand(2, 50, 2),
+        ...     "observation": torch.stack([grip, -grip]).unsqueeze(1).expand(2, 50, 25)}}, [2, 50])
+        >>> sampler = ReleasedCEBPSampler(workspace=((1.05, 0.4, 0.4), (1.55, 1.11, float("inf"))))  # Push's
+        >>> priority = sampler.episode_priority(episodes, torch.ones(2, 50, dtype=torch.bool))
         >>> bool(priority[0] > 1.0), bool(priority[1] < 1e-6)  # the second gripper never entered the box
         (True, True)
     """
+
+    beta = 1.0  # the code's, fixed
 
     def __init__(self, *, k: float = 0.1, **keys: Any) -> None:
         super().__init__(**keys)
@@ -204,51 +155,33 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
         centred = 100.0 * torch.sigmoid(self.k * x) - 50.0
         return centred.abs().sum(1) + FLOAT32_EPS
 
-    def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
-        return self._code_weights(probabilities, n_episodes, beta=1.0)
-
     def __repr__(self) -> str:
         return f"ReleasedCEBPSampler(k={self.k}, workspace={self.workspace}, n_episodes={self.n_episodes})"
 
 
 class InitialCEBPSampler(_ContactEnergySampler):
-    """CEBP as in the code's "Initial files" commit (the mocap Fetch): no sigmoid.
-
-    Per step ``x(t) = (f_l + f_r)(t) * ||d(t) - d(t-1)||`` (touch zeroed while the gripper is outside
-    the task's workspace box), priority ``sum_t |x(t)| + eps``; IS weights ``(N p)^-0.7`` over the
-    batch maximum, all ones while fewer than 256 episodes are stored. Episodes without contact all
-    share the priority ``eps``, so the few with contact dominate the draw.
+    """CEBP as in the code's "Initial files" commit (the mocap Fetch): the contact energy in the workspace box, no
+    sigmoid; IS weights as :class:`ReleasedCEBPSampler`'s, of exponent ``beta``.
 
     Args:
         beta (float, optional): the IS exponent. Defaults to ``0.7``, the commit's.
         workspace (tuple of two (x, y, z) tuples, optional): as :class:`ReleasedCEBPSampler`. Defaults to ``None``.
-        touch_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "touch")``.
-        position_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``"achieved_goal"``.
-        next_position_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "achieved_goal")``.
+        touch_key, position_key, next_position_key, end_key (NestedKey, optional): as :class:`CEBPSampler`.
         next_observation_key (NestedKey, optional): as :class:`ReleasedCEBPSampler`.
-            Defaults to ``("next", "observation")``.
-        end_key (NestedKey, optional): as :class:`CEBPSampler`. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
-        >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
         >>> from torchrl_cebp.replay.samplers import InitialCEBPSampler
-        >>> T = 50
-        >>> touch = torch.zeros(2, T, 2); touch[1] = 1.0  # only episode 1 touches
-        >>> episodes = TensorDict({
-        ...     "achieved_goal": torch.zeros(2, T, 3),
-        ...     "next": {"achieved_goal": torch.rand(2, T, 3), "touch": touch,
-        ...              "observation": torch.rand(2, T, 25) + torch.tensor([1.2, 0.6, 0.4] + [0.0] * 22)}}, [2, T])
-        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * T, ndim=2),
-        ...                             sampler=InitialCEBPSampler(workspace=((1.05, 0.4, 0.4), (1.55, 1.11, float("inf")))),
-        ...                             batch_size=8, dim_extend=0)
-        >>> _ = rb.extend(episodes)
-        >>> rb.sample()["index"][:, 0].tolist()
-        [1, 1, 1, 1, 1, 1, 1, 1]
+        >>> touch = torch.zeros(2, 50, 2)
+        >>> touch[1] = 1.0  # only episode 1 touches
+        >>> episodes = TensorDict({"achieved_goal": torch.zeros(2, 50, 3), "next": {
+        ...     "achieved_goal": torch.rand(2, 50, 3), "touch": touch, "observation": torch.rand(2, 50, 25)}}, [2, 50])
+        >>> InitialCEBPSampler().episode_priority(episodes, torch.ones(2, 50, dtype=torch.bool)).argmax().item()
+        1
     """
 
-    def __init__(self, *, beta: float = INITIAL_BETA, **keys: Any) -> None:
+    def __init__(self, *, beta: float = 0.7, **keys: Any) -> None:
         super().__init__(**keys)
         self.beta = checked("InitialCEBPSampler", "beta", beta)
 
@@ -256,9 +189,6 @@ class InitialCEBPSampler(_ContactEnergySampler):
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
         touch = self._touch(episodes, valid) * self._in_workspace(episodes)
         return (touch * distance).abs().sum(1) + FLOAT32_EPS
-
-    def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
-        return self._code_weights(probabilities, n_episodes, beta=self.beta)
 
     def __repr__(self) -> str:
         return f"InitialCEBPSampler(beta={self.beta}, workspace={self.workspace}, n_episodes={self.n_episodes})"

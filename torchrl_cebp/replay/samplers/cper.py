@@ -9,39 +9,30 @@ from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, checked, r
 
 
 class CPERSampler(EpisodePrioritySampler):
-    """Steps after the episode's cumulative touch passes a threshold weigh ``lam``, others 1.
-
-    An episode is drawn proportionally to the sum of its step weights, and the
-    step inside it by the same weights. No importance-sampling weights.
+    """Steps after the episode's cumulative touch passes a threshold weigh ``lam``, others 1: an episode is drawn in
+    proportion to the sum of its step weights, and a step in it by the same weights. No importance-sampling weights.
 
     Args:
-        threshold (float, optional): cumulative touch (left + right) above which a step counts as
-            contact-rich. Defaults to ``1.0``.
+        threshold (float, optional): cumulative touch (left + right) above which a step is contact-rich.
+            Defaults to ``1.0``.
         lam (float, optional): weight of a contact-rich step (``lambda`` in the paper). Defaults to ``10.0``.
-        touch_key (NestedKey, optional): the per-step touch of both finger pads, ``[T, 2]``.
-            Defaults to ``("next", "touch")``.
-        end_key (NestedKey, optional): the flag that ends an episode before its row does.
-            Defaults to ``("next", "done")``.
+        touch_key (NestedKey, optional): both finger pads' touch, ``[T, 2]``. Defaults to ``("next", "touch")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
         >>> from torchrl_cebp.replay.samplers import CPERSampler
-        >>> episodes = TensorDict({"next": {"touch": torch.rand(3, 50, 2)}}, [3, 50])
-        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
-        ...                             sampler=CPERSampler(), batch_size=4, dim_extend=0)
-        >>> _ = rb.extend(episodes)
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2), sampler=CPERSampler(),
+        ...                             batch_size=4, dim_extend=0)
+        >>> _ = rb.extend(TensorDict({"next": {"touch": torch.rand(3, 50, 2)}}, [3, 50]))
         >>> rb.sample().shape
         torch.Size([4])
     """
 
     def __init__(
-        self,
-        threshold: float = 1.0,
-        lam: float = 10.0,
-        *,
-        touch_key: NestedKey = ("next", "touch"),
+        self, threshold: float = 1.0, lam: float = 10.0, *, touch_key: NestedKey = ("next", "touch"),
         end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(end_key)

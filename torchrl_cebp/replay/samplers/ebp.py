@@ -13,50 +13,36 @@ STEP_SECONDS = 0.04  # 20 substeps of 2 ms: the Fetch control step
 
 
 class EBPSampler(EpisodePrioritySampler):
-    """Episodes drawn by the object's trajectory energy (potential + kinetic increases).
+    """Episodes drawn by the object's trajectory energy, its clipped increases of potential and kinetic energy.
 
-    Per step ``E(t) = w_p g m (z_t - z_0) + w_k m ||v_t||^2 / 2``; the
-    trajectory energy is ``sum_t clip(E(t) - E(t-1), 0, clip_energy)`` (with
-    ``E(t) - E(t-1) := E(1)`` at the first step), and ``p(e)`` is proportional
-    to ``energy^(1 / (temperature + 0.01))``. No importance-sampling weights.
+    The formula is in ``docs/samplers.md``. No importance-sampling weights.
 
     Args:
-        clip_energy (float, optional): per-step clip (0.5 for PickAndPlace in the paper, 999 otherwise).
-            Defaults to ``999.0``.
+        clip_energy (float, optional): per-step clip (0.5 for PickAndPlace in the paper). Defaults to ``999.0``.
         temperature (float, optional): sets the exponent ``1 / (temperature + 0.01)``. Defaults to ``1.0``.
         w_potential (float, optional): weight of the potential energy term. Defaults to ``1.0``.
         w_kinetic (float, optional): weight of the kinetic energy term. Defaults to ``1.0``.
-        position_key (NestedKey, optional): the object's position before each step, ``[T, 3]``.
-            Defaults to ``"achieved_goal"``.
-        next_position_key (NestedKey, optional): the object's position after each step, ``[T, 3]``.
-            Defaults to ``("next", "achieved_goal")``.
-        end_key (NestedKey, optional): the flag that ends an episode before its row does.
-            Defaults to ``("next", "done")``.
+        position_key (NestedKey, optional): the object's position before a step. Defaults to ``"achieved_goal"``.
+        next_position_key (NestedKey, optional): its position after a step. Defaults to ``("next", "achieved_goal")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
         >>> from torchrl_cebp.replay.samplers import EBPSampler
-        >>> episodes = TensorDict({"achieved_goal": torch.rand(3, 50, 3),
-        ...                        "next": {"achieved_goal": torch.rand(3, 50, 3)}}, [3, 50])
-        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
-        ...                             sampler=EBPSampler(clip_energy=0.5), batch_size=4, dim_extend=0)
-        >>> _ = rb.extend(episodes)
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2), sampler=EBPSampler(clip_energy=0.5),
+        ...                             batch_size=4, dim_extend=0)
+        >>> _ = rb.extend(TensorDict({"achieved_goal": torch.rand(3, 50, 3),
+        ...                           "next": {"achieved_goal": torch.rand(3, 50, 3)}}, [3, 50]))
         >>> rb.sample().shape
         torch.Size([4])
     """
 
     def __init__(
-        self,
-        clip_energy: float = 999.0,
-        temperature: float = 1.0,
-        *,
-        w_potential: float = 1.0,
-        w_kinetic: float = 1.0,
-        position_key: NestedKey = "achieved_goal",
-        next_position_key: NestedKey = ("next", "achieved_goal"),
-        end_key: NestedKey = ("next", "done"),
+        self, clip_energy: float = 999.0, temperature: float = 1.0, *, w_potential: float = 1.0,
+        w_kinetic: float = 1.0, position_key: NestedKey = "achieved_goal",
+        next_position_key: NestedKey = ("next", "achieved_goal"), end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(end_key)
         self.clip_energy = checked("EBPSampler", "clip_energy", clip_energy, exclusive=True)
@@ -69,21 +55,16 @@ class EBPSampler(EpisodePrioritySampler):
     def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
         return {self.position_key: (3,), self.next_position_key: (3,)}
 
-    def trajectory_energy(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
-        """The clipped, summed energy increases over each episode's valid steps (shape ``[n]``)."""
+    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         positions = episode_positions(episodes, self.position_key, self.next_position_key)
         height = positions[:, 1:, 2] - positions[:, :1, 2]
         velocity = (positions[:, 1:] - positions[:, :-1]) / STEP_SECONDS
         energy = self.w_potential * GRAVITY * MASS * height + self.w_kinetic * 0.5 * MASS * velocity.pow(2).sum(-1)
         increase = torch.cat([energy[:, :1], energy.diff(dim=1)], dim=1)
-        return (increase.clamp(0.0, self.clip_energy) * valid).sum(1)
-
-    def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        trajectory_energy = (increase.clamp(0.0, self.clip_energy) * valid).sum(1)
         # eps keeps a buffer of motionless episodes drawable (uniformly) instead of all-zero.
-        return self.trajectory_energy(episodes, valid).pow(1.0 / (self.temperature + 0.01)) + FLOAT32_EPS
+        return trajectory_energy.pow(1.0 / (self.temperature + 0.01)) + FLOAT32_EPS
 
     def __repr__(self) -> str:
-        return (
-            f"EBPSampler(clip_energy={self.clip_energy}, temperature={self.temperature}, "
-            f"n_episodes={self.n_episodes})"
-        )
+        return (f"EBPSampler(clip_energy={self.clip_energy}, temperature={self.temperature}, "
+                f"n_episodes={self.n_episodes})")

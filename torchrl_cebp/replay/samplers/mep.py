@@ -15,8 +15,7 @@ from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, checked, e
 
 # The paper's code adds it to the dense rank (from 0), so that the most common trajectories stay drawable.
 RANK_OFFSET = 0.001
-# The fitted attributes of a BayesianGaussianMixture (weight_concentration_prior_type="dirichlet_distribution")
-# that score_samples reads: sklearn's public fitted state, saved by name.
+# What score_samples reads of a fitted BayesianGaussianMixture (sklearn's public fitted state), saved by name.
 MIXTURE_STATE = ("weight_concentration_", "mean_precision_", "means_", "degrees_of_freedom_",
                  "covariances_", "precisions_cholesky_")
 
@@ -24,66 +23,41 @@ MIXTURE_STATE = ("weight_concentration_", "mean_precision_", "means_", "degrees_
 class MEPSampler(EpisodePrioritySampler):
     """Rare achieved-goal trajectories first: rank of the -log density under a Bayesian GMM.
 
-    A :class:`sklearn.mixture.BayesianGaussianMixture` (Dirichlet-distribution
-    prior) is fitted on the flattened achieved-goal trajectories of the buffer
-    by :meth:`refit`, which the trainer calls on a schedule (once per epoch,
-    before the epoch's last cycle is stored, as the paper's code does). Each
-    episode's score is its ``-log density`` less the lowest score of the last
-    fit, floored at 0. After every write, every stored episode is ranked
-    (dense ranks from 0, over the whole buffer) and ``p(e)`` is proportional to
-    ``(rank + 0.001) ^ (1 / (temperature + 0.01))``: the ``entropy`` mode of
-    HER_force (the paper's released code). Episodes written between refits are scored
-    by the current mixture. Before the first refit every episode has rank 0, so
-    draws are uniform. No importance-sampling weights.
+    :meth:`refit` fits a :class:`sklearn.mixture.BayesianGaussianMixture` on the buffer's achieved-goal trajectories;
+    every write ranks the whole buffer again (the formula is in ``docs/samplers.md``). Until the first refit every
+    rank is 0: uniform draws. No importance-sampling weights.
 
     Args:
-        n_components (int, optional): mixture components (3 in MEP). Defaults to ``3``.
-        temperature (float, optional): sets the rank exponent ``1 / (temperature + 0.01)``.
-            Defaults to ``1.0``.
-        max_fit_episodes (int, optional): fit on at most this many stored episodes drawn at
-            random (all are scored); bounds the refit cost on large buffers. Defaults to ``5000``.
+        n_components (int, optional): mixture components. Defaults to ``3``, MEP's.
+        temperature (float, optional): sets the rank exponent. Defaults to ``1.0``.
+        max_fit_episodes (int, optional): fit on at most this many stored episodes, drawn at random (all are
+            scored); bounds a refit's cost. Defaults to ``5000``.
         max_iter (int, optional): EM iterations per refit. Defaults to ``100``.
-        reg_covar (float, optional): added to the covariances' diagonal and to the Wishart prior's
-            (the data's covariance). Early buffers hold many identical
-            trajectories (the object never moved), whose singular covariance
-            breaks sklearn's default prior; 1e-4 is a 1 cm standard deviation
-            on positions in metres. Defaults to ``1e-4``.
+        reg_covar (float, optional): added to the covariances' diagonal and to the Wishart prior's, which an early
+            buffer's many identical trajectories make singular; 1e-4 is a 1 cm standard deviation. Defaults to ``1e-4``.
         seed (int, optional): seeds the mixture's initialisation and the fit subsample. Defaults to ``0``.
-        position_key (NestedKey, optional): the object's position before each step, ``[T, 3]``.
-            Defaults to ``"achieved_goal"``.
-        next_position_key (NestedKey, optional): the object's position after each step, ``[T, 3]``.
-            Defaults to ``("next", "achieved_goal")``.
-        end_key (NestedKey, optional): the flag that ends an episode before its row does.
-            Defaults to ``("next", "done")``.
+        position_key (NestedKey, optional): the object's position before a step. Defaults to ``"achieved_goal"``.
+        next_position_key (NestedKey, optional): its position after a step. Defaults to ``("next", "achieved_goal")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
         >>> from torchrl_cebp.replay.samplers import MEPSampler
-        >>> episodes = TensorDict({"achieved_goal": torch.rand(20, 50, 3),
-        ...                        "next": {"achieved_goal": torch.rand(20, 50, 3)}}, [20, 50])
-        >>> sampler = MEPSampler()
-        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * 50, ndim=2),
-        ...                             sampler=sampler, batch_size=4, dim_extend=0)
-        >>> _ = rb.extend(episodes)
-        >>> sampler.refit(rb.storage)
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100 * 50, ndim=2), sampler=MEPSampler(),
+        ...                             batch_size=4, dim_extend=0)
+        >>> _ = rb.extend(TensorDict({"achieved_goal": torch.rand(20, 50, 3),
+        ...                           "next": {"achieved_goal": torch.rand(20, 50, 3)}}, [20, 50]))
+        >>> rb.sampler.refit(rb.storage)
         >>> rb.sample().shape
         torch.Size([4])
     """
 
     def __init__(
-        self,
-        n_components: int = 3,
-        temperature: float = 1.0,
-        *,
-        max_fit_episodes: int = 5000,
-        max_iter: int = 100,
-        reg_covar: float = 1e-4,
-        seed: int = 0,
-        position_key: NestedKey = "achieved_goal",
-        next_position_key: NestedKey = ("next", "achieved_goal"),
-        end_key: NestedKey = ("next", "done"),
+        self, n_components: int = 3, temperature: float = 1.0, *, max_fit_episodes: int = 5000, max_iter: int = 100,
+        reg_covar: float = 1e-4, seed: int = 0, position_key: NestedKey = "achieved_goal",
+        next_position_key: NestedKey = ("next", "achieved_goal"), end_key: NestedKey = ("next", "done"),
     ) -> None:
         super().__init__(end_key)
         self.n_components = int(checked("MEPSampler", "n_components", n_components, minimum=1))
@@ -98,17 +72,15 @@ class MEPSampler(EpisodePrioritySampler):
         self._lowest_fit_score = 0.0
         self._scores = torch.zeros(0, dtype=torch.float64)  # per episode row; 0 until the first refit
         self._n_refits = 0
+        self._levels = torch.zeros(0, dtype=torch.float64)  # the priority of each rank
 
     def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
         return {self.position_key: (3,), self.next_position_key: (3,)}
 
     def _new_mixture(self, covariance_prior: np.ndarray | None = None) -> BayesianGaussianMixture:
         return BayesianGaussianMixture(
-            covariance_prior=covariance_prior,
-            n_components=self.n_components,
-            weight_concentration_prior_type="dirichlet_distribution",
-            max_iter=self.max_iter,
-            reg_covar=self.reg_covar,
+            n_components=self.n_components, weight_concentration_prior_type="dirichlet_distribution",
+            covariance_prior=covariance_prior, max_iter=self.max_iter, reg_covar=self.reg_covar,
             random_state=self.seed + self._n_refits,
         )
 
@@ -123,32 +95,40 @@ class MEPSampler(EpisodePrioritySampler):
         return torch.from_numpy(-self._mixture.score_samples(trajectories))
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
-        # A placeholder: an episode's priority is its rank among all stored episodes, set once the written
-        # episodes are scored (write_priorities).
-        return torch.ones(episodes.shape[0], dtype=torch.float64)
+        # Rank 0's, every episode's until the first refit; after it, write_priorities ranks the buffer again.
+        return self._rank_priorities(torch.zeros(episodes.shape[0], dtype=torch.long))
 
     def write_priorities(
         self, rows: torch.Tensor, episodes: TensorDictBase, lengths: torch.Tensor | None = None
     ) -> None:
         if lengths is None:
             lengths = episode_lengths(episodes, self.end_key)
+        n_before = self.n_episodes
         super().write_priorities(rows, episodes, lengths)
         if self._scores.numel() != self._tree.size:
             self._scores = torch.zeros(self._tree.size, dtype=torch.float64)
-        if self._mixture is not None:
-            valid = valid_steps(lengths, episodes.shape[1])
-            raw = self._raw_scores(self._trajectories(episodes, valid))
-            self._scores[rows] = (raw - self._lowest_fit_score).clamp(min=0.0)
+        if self._mixture is None:  # every score is 0 until the first refit: only rows new to the buffer get rank 0
+            frontier = torch.arange(n_before, self.n_episodes)
+            self.set_priorities(frontier, self._rank_priorities(torch.zeros_like(frontier)))
+            return
+        raw = self._raw_scores(self._trajectories(episodes, valid_steps(lengths, episodes.shape[1])))
+        self._scores[rows] = (raw - self._lowest_fit_score).clamp(min=0.0)
         self._rank_stored()
 
     def _rank_stored(self) -> None:
         """Dense ranks from 0 of every stored episode's score, as priorities."""
         rows = torch.arange(self.n_episodes)
-        rank = torch.unique(self._scores[rows], return_inverse=True)[1]
-        self.set_priorities(rows, (rank.double() + RANK_OFFSET).pow(1.0 / (self.temperature + 0.01)))
+        self.set_priorities(rows, self._rank_priorities(torch.unique(self._scores[rows], return_inverse=True)[1]))
+
+    def _rank_priorities(self, ranks: torch.Tensor) -> torch.Tensor:
+        # A table, so that a rank's priority does not depend on which rows are written with it.
+        if self._levels.numel() != self._tree.size:
+            levels = torch.arange(self._tree.size, dtype=torch.float64) + RANK_OFFSET
+            self._levels = levels.pow(1.0 / (self.temperature + 0.01))
+        return self._levels[ranks]
 
     def refit(self, storage: Storage) -> None:
-        """Fits the mixture on the stored trajectories, rescores and re-ranks every stored episode."""
+        """Fits the mixture on the stored trajectories, then scores and ranks every stored episode."""
         if self.n_episodes < self.n_components:
             return
         rows = torch.arange(self.n_episodes)
@@ -197,7 +177,5 @@ class MEPSampler(EpisodePrioritySampler):
         self._lowest_fit_score = 0.0
 
     def __repr__(self) -> str:
-        return (
-            f"MEPSampler(n_components={self.n_components}, temperature={self.temperature}, "
-            f"refits={self._n_refits}, n_episodes={self.n_episodes})"
-        )
+        return (f"MEPSampler(n_components={self.n_components}, temperature={self.temperature}, "
+                f"refits={self._n_refits}, n_episodes={self.n_episodes})")

@@ -20,64 +20,40 @@ SCHEDULER_FILE = "beta_scheduler.json"
 
 
 class PERSampler(PrioritizedSampler):
-    """TorchRL's segment-tree :class:`~torchrl.data.PrioritizedSampler` with beta annealed 0.4 -> 1.
+    """TorchRL's segment-tree :class:`~torchrl.data.PrioritizedSampler` over the transitions of episode rows.
 
-    Priorities are per transition, ``(|TD error| + eps) ^ alpha``; new
-    transitions enter at the highest priority seen, and the padding steps of
-    episodes that ended early at probability 0. Feed priorities back after
-    each update with ``rb.update_tensordict_priority(batch)`` (the batch holds
-    ``"td_error"`` once a TorchRL loss ran on it) or ``rb.update_priority``, inside a
-    :class:`~torchrl_cebp.replay.samplers.PerWorkerSampler` too.
-    Beta grows linearly from ``beta`` to ``beta_end`` over ``beta_anneal_draws``
-    draws, as in baselines' PER over training, through the TorchRL scheduler
-    :meth:`beta_scheduler` returns: step it once per draw.
-
-    :meth:`state_dict` holds plain tensors and numbers (``torch.load(weights_only=True)``
-    refuses the C++ trees of TorchRL's own), the scheduler's step count included, so a
-    resumed anneal goes on where it stopped. :meth:`load_state_dict` also reads the state
-    of a TorchRL :class:`~torchrl.data.PrioritizedSampler`; give one of those
-    ``PrioritizedSampler.state_dict(per_sampler)``, this sampler's state in TorchRL's form.
-    :meth:`dumps` writes TorchRL's files, which either sampler :meth:`loads`.
+    Priorities are per transition (the padding steps of episodes that ended early at 0); feed TD errors back with
+    ``rb.update_tensordict_priority(batch)``. Beta grows linearly from ``beta`` to ``beta_end``, one step of
+    :meth:`beta_scheduler` per draw. The formula is in ``docs/samplers.md``; the state and dumps are TorchRL's
+    sampler's (:meth:`state_dict`, :meth:`dumps`).
 
     Args:
         capacity (int, optional): storage capacity in transitions, the buffer's. Defaults to ``1_000_000``.
         alpha (float, optional): priority exponent. Defaults to ``0.6``.
         beta (float, optional): initial IS exponent. Defaults to ``0.4``.
         beta_end (float, optional): final IS exponent. Defaults to ``1.0``.
-        beta_anneal_draws (int, optional): number of draws over which beta is annealed. Defaults to ``100_000``.
+        beta_anneal_draws (int, optional): draws over which beta is annealed. Defaults to ``100_000``.
         eps (float, optional): added to ``|TD error|``. Defaults to ``1e-6``, as in baselines.
-        end_key (NestedKey, optional): the flag that ends an episode before its row does.
-            Defaults to ``("next", "done")``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch
         >>> from tensordict import TensorDict
         >>> from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
         >>> from torchrl_cebp.replay.samplers import PERSampler
-        >>> episodes = TensorDict({"observation": torch.randn(3, 50, 25)}, [3, 50])
-        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2),
-        ...                             sampler=PERSampler(10 * 50), batch_size=4, dim_extend=0,
-        ...                             priority_key="td_error")
-        >>> _ = rb.extend(episodes)
-        >>> batch = rb.sample()
-        >>> _ = batch.set("td_error", torch.rand(4))
+        >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * 50, ndim=2), sampler=PERSampler(10 * 50),
+        ...                             batch_size=4, dim_extend=0, priority_key="td_error")
+        >>> _ = rb.extend(TensorDict({"observation": torch.randn(3, 50, 25)}, [3, 50]))
+        >>> batch = rb.sample().set("td_error", torch.rand(4))
         >>> rb.update_tensordict_priority(batch)
-        >>> scheduler = rb.sampler.beta_scheduler()
-        >>> scheduler.step()
+        >>> rb.sampler.beta_scheduler().step()
         >>> round(float(rb.sampler.beta), 6)  # one of 100,000 steps from 0.4 to 1
         0.400006
     """
 
     def __init__(
-        self,
-        capacity: int = 1_000_000,
-        alpha: float = 0.6,
-        beta: float = 0.4,
-        beta_end: float = 1.0,
-        beta_anneal_draws: int = 100_000,
-        eps: float = 1e-6,
-        *,
-        end_key: NestedKey = ("next", "done"),
+        self, capacity: int = 1_000_000, alpha: float = 0.6, beta: float = 0.4, beta_end: float = 1.0,
+        beta_anneal_draws: int = 100_000, eps: float = 1e-6, *, end_key: NestedKey = ("next", "done"),
     ) -> None:
         capacity = int(checked("PERSampler", "capacity", capacity, minimum=1))
         alpha, beta = checked("PERSampler", "alpha", alpha), checked("PERSampler", "beta", beta)
@@ -91,10 +67,7 @@ class PERSampler(PrioritizedSampler):
         return LinearScheduler(self, "beta", final_value=self.beta_end, num_steps=self.beta_anneal_draws)
 
     def beta_scheduler(self) -> LinearScheduler:
-        """The sampler's TorchRL linear scheduler: beta from ``beta`` to ``beta_end`` in ``beta_anneal_draws`` steps.
-
-        One per sampler, so that its step count is part of the sampler's state (and of the buffer's).
-        """
+        """The sampler's one TorchRL linear scheduler of beta, whose step count its state (and the buffer's) holds."""
         return self._beta_scheduler
 
     def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
@@ -115,7 +88,10 @@ class PERSampler(PrioritizedSampler):
             _upstream.exclude_from_draws(self, rows[rows_of] * row_length + steps_of)
 
     def state_dict(self) -> dict[str, Any]:
-        """Plain tensors and numbers only (TorchRL's own holds C++ trees, which ``weights_only`` loads refuse)."""
+        """TorchRL's sampler's state as plain tensors and numbers, which ``torch.load(weights_only=True)`` reads.
+
+        TorchRL's own holds C++ trees; give one of its samplers ``PrioritizedSampler.state_dict(per_sampler)``.
+        """
         return {**_upstream.prioritized_state(self), "beta_scheduler": self._beta_scheduler.state_dict()}
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
@@ -135,7 +111,8 @@ class PERSampler(PrioritizedSampler):
             self._beta_scheduler.load_state_dict(scheduler_state)
 
     def dumps(self, path: str | Path) -> None:
-        """TorchRL's files (trees as memory maps, numbers as JSON), and the beta scheduler's state beside them."""
+        """TorchRL's files (trees as memory maps, numbers as JSON), which either sampler loads, and the beta
+        scheduler's state beside them."""
         super().dumps(path)
         (Path(path) / SCHEDULER_FILE).write_text(json.dumps(self._beta_scheduler.state_dict()))
 
@@ -163,7 +140,5 @@ class PERSampler(PrioritizedSampler):
         self._beta_scheduler.load_state_dict(scheduler_state)
 
     def __repr__(self) -> str:
-        return (
-            f"PERSampler(alpha={self.alpha}, beta={self.beta:.3f} -> {self.beta_end} over "
-            f"{self.beta_anneal_draws} draws)"
-        )
+        return (f"PERSampler(alpha={self.alpha}, beta={self.beta:.3f} -> {self.beta_end} over "
+                f"{self.beta_anneal_draws} draws)")

@@ -10,11 +10,10 @@ from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler
 
 
 class UniformEpisodeSampler(EpisodePrioritySampler):
-    """Uniform episode, then uniform valid step: what HER (Andrychowicz et al.) replays.
+    """Uniform episode, then uniform valid step: what HER replays, and keeps no priorities to do it.
 
-    With episodes of one length this is TorchRL's :class:`~torchrl.data.RandomSampler` over an ``ndim=2``
-    storage; unlike it, this never draws the padding steps after an episode that ended early. It keeps no
-    priorities: a write costs it nothing but the count of filled rows.
+    With episodes of one length this is TorchRL's :class:`~torchrl.data.RandomSampler` over an ``ndim=2`` storage,
+    which unlike this also draws the padding after an episode that ended early.
 
     Args:
         end_key (NestedKey, optional): the flag that ends an episode; no step after it is drawn.
