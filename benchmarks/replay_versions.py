@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import math
 import statistics
 import subprocess
 import sys
@@ -28,6 +29,7 @@ from _peers import BATCH_SIZE, FUTURE_P, build_torchrl_her, episodes_to_tensordi
 
 ROOT = Path(__file__).resolve().parents[1]
 POOL_EPISODES = 32
+EPISODES_PER_WORKER = 2  # the paper's envs per worker: a per-worker buffer is written a cycle of them at a time
 WARMUP = 10
 
 
@@ -64,16 +66,26 @@ def reward(achieved: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
     return -(torch.linalg.vector_norm(achieved - goal, dim=-1, keepdim=True) > 0.05).float()
 
 
-def build(package, cls_name: str, kwargs: dict, stored, pool) -> tuple[Callable[[], object], Callable[[], object]]:
-    """A filled buffer of ``package``'s: its draw, and a write of the next pool episode."""
-    sampler = getattr(package.replay.samplers, cls_name)(**kwargs)
+Draw = Callable[[], object]
+
+
+def build(package, cls_name: str, kwargs: dict, stored, pool, workers: int) -> tuple[Draw, Callable[[], object]]:
+    """A filled buffer of ``package``'s: its draw, and a write of the next pool episodes (one per env of a cycle)."""
+    samplers = package.replay.samplers
+    if workers == 1:
+        sampler = getattr(samplers, cls_name)(**kwargs)
+    else:  # each worker's PER holds its share of the transitions
+        share = {**kwargs, "capacity": kwargs["capacity"] // workers} if "capacity" in kwargs else kwargs
+        sampler = samplers.PerWorkerSampler(*[getattr(samplers, cls_name)(**share) for _ in range(workers)],
+                                            episodes_per_worker=EPISODES_PER_WORKER)
     capacity = len(stored) * stored.u.shape[1]
     her = package.replay.HindsightRelabel(reward, future_p=FUTURE_P, strategy="future")
-    rb = package.replay.make_replay_buffer(sampler, her, capacity=capacity, batch_size=BATCH_SIZE)
+    rb = package.replay.make_replay_buffer(sampler, her, capacity=capacity, batch_size=BATCH_SIZE * workers)
     rb.extend(episodes_to_tensordict(stored))
     if hasattr(sampler, "refit"):
         sampler.refit(rb.storage)
-    fresh = itertools.cycle([episodes_to_tensordict(pool.slice(i, i + 1)) for i in range(len(pool))])
+    cycle = 1 if workers == 1 else workers * EPISODES_PER_WORKER
+    fresh = itertools.cycle([episodes_to_tensordict(pool.slice(i, i + cycle)) for i in range(0, len(pool), cycle)])
     return rb.sample, lambda: rb.extend(next(fresh))
 
 
@@ -89,7 +101,12 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=20000, help="stored 50-step episodes")
     parser.add_argument("--repeats", type=int, default=300, help="turns of each measurement")
     parser.add_argument("--samplers", nargs="+", default=None, help="a subset of the samplers (default: all)")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="per-worker replay of this many workers (PerWorkerSampler, the paper's scale: 8): draws "
+                             "of 256 per worker, writes of 2 episodes per worker; no TorchRL column")
     args = parser.parse_args()
+    if args.workers > 1 and args.episodes % (args.workers * EPISODES_PER_WORKER):
+        parser.error(f"--episodes must be a multiple of {args.workers * EPISODES_PER_WORKER} with --workers {args.workers}")
     torch.set_num_threads(1)
     import torchrl_cebp.replay.samplers  # noqa: F401  (the package's samplers, as the other commit's)
     import torchrl_cebp
@@ -101,7 +118,8 @@ def main() -> None:
     unknown = sorted(set(names) - set(arguments))
     if unknown:
         parser.error(f"unknown samplers {unknown}; known: {sorted(arguments)}")
-    print(f"median ms over {args.repeats} turns, {args.episodes} stored episodes; before = {args.before}, "
+    print(f"median ms over {args.repeats} turns, {args.episodes} stored episodes, {args.workers} worker(s); "
+          f"before = {args.before}, "
           "after = this checkout; write / TorchRL = this checkout's write over TorchRL's HERReplayBuffer's", flush=True)
     group = f"{'before':>8s} {'after':>8s} {'ratio':>6s}"
     header = (f"{'':14s} {'draw':^24s}   {'draw after a write':^24s}   {'write one episode':^24s}   {'write':>9s}\n"
@@ -111,9 +129,9 @@ def main() -> None:
         before_package = import_commit(args.before, Path(scratch))
         for name in names:
             cls_name, kwargs = arguments[name]
-            versions = {"old": build(before_package, cls_name, kwargs, stored, pool),
-                        "new": build(torchrl_cebp, cls_name, kwargs, stored, pool)}
-            _, torchrl_write = build_torchrl_her(stored, pool, WARMUP + 3 * args.repeats)
+            versions = {"old": build(before_package, cls_name, kwargs, stored, pool, args.workers),
+                        "new": build(torchrl_cebp, cls_name, kwargs, stored, pool, args.workers)}
+            torchrl_write = build_torchrl_her(stored, pool, WARMUP + 3 * args.repeats)[1] if args.workers == 1 else None
             measures = ("draw", "draw after write", "write")
             times: dict[str, list[float]] = {f"{v} {m}": [] for v in versions for m in measures}
             times["torchrl write"] = []
@@ -124,7 +142,7 @@ def main() -> None:
                     if turn >= WARMUP:
                         for measure, value in measured.items():
                             times[f"{version} {measure}"].append(value)
-                torchrl_ms = elapsed_ms(torchrl_write)
+                torchrl_ms = elapsed_ms(torchrl_write) if torchrl_write is not None else math.nan
                 if turn >= WARMUP:
                     times["torchrl write"].append(torchrl_ms)
             median = {key: statistics.median(values) for key, values in times.items()}

@@ -34,8 +34,13 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
         return torch.ones(episodes.shape[0], dtype=torch.float64)
 
     def _catch_up(self, storage: Storage, written: torch.Tensor | None = None) -> None:
-        # Equal priorities: only how many rows are filled changes, whichever process filled them.
-        self._n_stored = storage.shape[0] if len(storage) else 0
+        # Equal priorities: only how many rows are filled changes, whichever process filled them. Read after a write
+        # only: a storage's shape (a worker view's above all) costs more than the rest of a draw.
+        if self._seen is None and not len(storage):
+            return
+        writes = self._write_counts(storage)[-1:]
+        if self._seen is None or not torch.equal(writes, self._seen):
+            self._n_stored, self._seen = storage.shape[0], writes.clone()
 
     def draw_episodes(self, batch_size: int) -> torch.Tensor:
         return torch.randint(self._n_stored, (batch_size,), generator=_upstream.sampler_generator(self))
