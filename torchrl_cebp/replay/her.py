@@ -122,8 +122,8 @@ class HindsightRelabel(SampleUnit):
         reward = self.reward_fn(next_achieved, goal)
         entries = {self.goal_key: goal, next_key(self.goal_key): goal, self.reward_key: reward}
         if with_success and self.success_key is not None:
-            success = reward == 0
-            if not bool((success | (reward == -1)).all()):
+            success = reward + 1  # 1 on success and 0 otherwise, for the sparse rewards the flag is read from
+            if bool((reward * success).any()):  # a reward other than -1 and 0
                 raise ValueError(
                     f"HindsightRelabel writes {self.success_key!r} as reward == 0, right for sparse rewards in "
                     f"{{-1, 0}} only, but reward_fn gave {reward.unique()[:5].tolist()}: give HindsightRelabel "
@@ -204,10 +204,11 @@ class HindsightRelabel(SampleUnit):
         self._pending.draw = None
         self._collated = True
         # Stored episodes without the success flag get none.
-        with_success = self.success_key is not None and self.success_key in data.keys(True, True)
-        entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key), with_success)
+        success = None if self.success_key is None else data.get(self.success_key, None)
+        entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key),
+                                   success is not None)
         for key, value in entries.items():
-            data.set(key, value.to(data.get(key).dtype) if key == self.success_key else value)
+            data.set(key, value.to(success.dtype) if key == self.success_key else value)
         return data
 
     # A thread-local cannot be pickled; a pending draw belongs to the thread between a buffer's expand and its

@@ -55,7 +55,7 @@ class _EpisodeRows:
     @property
     def write_counts(self) -> torch.Tensor | None:
         """Each row's write count, then the count of write starts and ends (odd while one runs); ``None`` if empty."""
-        if self.initialized:
+        if self._lengths is None and self.initialized:
             self._read_lengths_if_unknown()
         return self._write_counts
 
@@ -66,10 +66,11 @@ class _EpisodeRows:
 
     def common_length(self) -> int | None:
         """The valid length every row shares (the row length unless episodes end early), else ``None``."""
-        self._read_lengths_if_unknown()
+        if self._lengths is None:
+            self._read_lengths_if_unknown()
         # A full pass only while every episode ends early: while some do and others not, none is common.
         short = int(self._short_rows)
-        if short == 0:
+        if not short:
             return self._steps
         return common_length(self._lengths) if short == self._lengths.numel() else None
 

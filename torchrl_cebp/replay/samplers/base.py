@@ -165,6 +165,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def __init__(self, end_key: NestedKey = ("next", "done")) -> None:
         self.end_key = end_key
+        self._priorities = torch.zeros(0, dtype=torch.float64)  # the tree's leaves: a draw reads them faster here
         self._cumulative_step_weights: torch.Tensor | None = None
         self._tree: SumSegmentTreeFp64 | None = None
         self._n_stored = 0
@@ -207,6 +208,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         n_rows = storage.max_size // storage.shape[1]
         if self._tree is None:
             self._tree = SumSegmentTreeFp64(n_rows)
+            self._priorities = torch.zeros(n_rows, dtype=torch.float64)
         elif self._tree.size != n_rows:
             raise ValueError(
                 f"{type(self).__name__} holds priorities for {self._tree.size} episode rows (of another buffer, "
@@ -300,16 +302,11 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def priorities(self) -> torch.Tensor:
         """Every row's priority (empty before the first write)."""
-        if self._tree is None:
-            return torch.zeros(0, dtype=torch.float64)
-        return self._leaves(torch.arange(self._tree.size))
-
-    def _leaves(self, rows: torch.Tensor) -> torch.Tensor:
-        # The tree answers a one-element index with a float.
-        return torch.as_tensor(self._tree[rows], dtype=torch.float64).reshape(rows.shape)
+        return self._priorities.clone()
 
     def set_priorities(self, rows: torch.Tensor, priority: torch.Tensor) -> None:
         """Overwrites the priorities of ``rows`` (used on write, and by samplers that re-rank)."""
+        self._priorities[rows] = priority
         self._tree[rows] = priority
 
     def _uniform(self, *shape: int) -> torch.Tensor:
@@ -341,7 +338,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
         """Probability of drawing each of ``rows`` under the current priorities."""
-        return self._leaves(rows) / self._tree.query(0, self._tree.size)
+        return self._priorities[rows] / self._tree.query(0, self._tree.size)
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
         self._catch_up(storage)
@@ -367,7 +364,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         # Older states also carry the valid lengths, which the storage keeps: they are left unread.
-        priorities = state_dict["priorities"].to(torch.float64)
+        priorities = self._priorities = state_dict["priorities"].to(torch.float64).clone()
         self._n_stored = int(state_dict["n_stored"])
         steps = state_dict.get("cumulative_step_weights")
         self._cumulative_step_weights = None if steps is None else steps.clone()
@@ -384,6 +381,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                               for name, value in state.items()})
 
     def _empty(self) -> None:
+        self._priorities.zero_()
         if self._tree is not None:
             self._tree = SumSegmentTreeFp64(self._tree.size)
         self._cumulative_step_weights = None

@@ -12,7 +12,7 @@ from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
-from torchrl_cebp.replay.episodes import shared_length, stored_lengths
+from torchrl_cebp.replay.episodes import stored_lengths
 from torchrl_cebp.replay.samplers.base import EpisodeSampler, dump_state, load_state, split_index, stored_rows
 
 
@@ -93,6 +93,7 @@ class WorkerRows(_upstream.StorageView, Storage):
     # Storage.__init__ is not called: it sets max_size, which a view reads from the storage it views.
     def __init__(self, storage: Storage, worker: int, layout: WorkerLayout) -> None:
         self.storage, self.worker, self.layout = storage, worker, layout
+        self.end_key: NestedKey | None = getattr(storage, "end_key", None)  # where the storage cuts episodes, if it does
         self._gathered: tuple[torch.Tensor, int, torch.Tensor] | None = None  # write_counts, until a write
 
     @property
@@ -122,18 +123,14 @@ class WorkerRows(_upstream.StorageView, Storage):
             return self.storage.get((self.global_rows(torch.as_tensor(index[0])), *index[1:]))
         return self.storage.get(self.global_rows(torch.as_tensor(index)))
 
-    @property
-    def end_key(self) -> NestedKey | None:
-        """The flag at which the storage cuts its episodes (``None`` for a storage that cuts none)."""
-        return getattr(self.storage, "end_key", None)
-
     def valid_lengths(self, rows: torch.Tensor) -> torch.Tensor:
         """Valid steps of this worker's episodes in ``rows``, as the storage knows them."""
         return stored_lengths(self.storage, self.global_rows(rows), self.end_key)
 
     def common_length(self) -> int | None:
-        """The valid length every episode of the storage shares, else ``None``."""
-        return shared_length(self.storage, self.end_key)
+        """The valid length every episode of the storage shares, else ``None`` (always, if it keeps no lengths)."""
+        common_length = getattr(self.storage, "common_length", None)
+        return None if common_length is None else common_length()
 
     def set(self, *args: Any, **kwargs: Any) -> None:
         raise RuntimeError("WorkerRows is a read-only view of a worker's rows: write into, or empty, the whole storage")

@@ -38,9 +38,9 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
         # only: a storage's shape (a worker view's above all) costs more than the rest of a draw.
         if self._seen is None and not len(storage):
             return
-        writes = self._write_counts(storage)[-1:]
-        if self._seen is None or not torch.equal(writes, self._seen):
-            self._n_stored, self._seen = storage.shape[0], writes.clone()
+        writes = int(self._write_counts(storage)[-1])
+        if writes != self._seen:  # here the total of write starts and ends, not each row's count
+            self._n_stored, self._seen = storage.shape[0], writes
 
     def draw_episodes(self, batch_size: int) -> torch.Tensor:
         return torch.randint(self._n_stored, (batch_size,), generator=_upstream.sampler_generator(self))
