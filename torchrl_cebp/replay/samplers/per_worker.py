@@ -299,7 +299,7 @@ class PerWorkerSampler(Sampler):
             )
         views = self.worker_views(storage)
         # The last worker owns the fewest of the filled rows: if it has one, every worker has.
-        if not len(views[-1]):
+        if not self.layout.rows_of_worker(storage.shape[0], workers - 1):
             raise RuntimeError(
                 f"PerWorkerSampler: a worker holds no episodes yet: write {self.layout.cycle} "
                 f"episodes at a time, {self.layout.episodes_per_worker} per worker"
