@@ -105,8 +105,9 @@ def main() -> None:
                         help="per-worker replay of this many workers (PerWorkerSampler, the paper's scale: 8): draws "
                              "of 256 per worker, writes of 2 episodes per worker; no TorchRL column")
     args = parser.parse_args()
-    if args.workers > 1 and args.episodes % (args.workers * EPISODES_PER_WORKER):
-        parser.error(f"--episodes must be a multiple of {args.workers * EPISODES_PER_WORKER} with --workers {args.workers}")
+    cycle = args.workers * EPISODES_PER_WORKER
+    if args.workers > 1 and args.episodes % cycle:
+        parser.error(f"--episodes must be a multiple of {cycle} with --workers {args.workers}, got {args.episodes}")
     torch.set_num_threads(1)
     import torchrl_cebp.replay.samplers  # noqa: F401  (the package's samplers, as the other commit's)
     import torchrl_cebp
@@ -122,7 +123,8 @@ def main() -> None:
           f"before = {args.before}, "
           "after = this checkout; write / TorchRL = this checkout's write over TorchRL's HERReplayBuffer's", flush=True)
     group = f"{'before':>8s} {'after':>8s} {'ratio':>6s}"
-    header = (f"{'':14s} {'draw':^24s}   {'draw after a write':^24s}   {'write one episode':^24s}   {'write':>9s}\n"
+    written = "write one episode" if args.workers == 1 else f"write {args.workers * EPISODES_PER_WORKER} episodes"
+    header = (f"{'':14s} {'draw':^24s}   {'draw after a write':^24s}   {written:^24s}   {'write':>9s}\n"
               f"{'sampler':14s} {group}   {group}   {group}   {'/ TorchRL':>9s}")
     print(header + "\n" + "-" * len(header.splitlines()[1]), flush=True)
     with tempfile.TemporaryDirectory() as scratch:
@@ -150,8 +152,9 @@ def main() -> None:
             for measure in measures:
                 old, new = median[f"old {measure}"], median[f"new {measure}"]
                 columns.append(f"{old:8.3f} {new:8.3f} {new / old:6.2f}")
-            print(f"{name:14s} " + "   ".join(columns) + f"   {median['new write'] / median['torchrl write']:8.2f}x",
-                  flush=True)
+            versus_torchrl = median["new write"] / median["torchrl write"]
+            print(f"{name:14s} " + "   ".join(columns) + ("        -" if math.isnan(versus_torchrl) else
+                                                            f"   {versus_torchrl:8.2f}x"), flush=True)
             del versions
 
 
