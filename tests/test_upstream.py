@@ -192,3 +192,16 @@ def test_every_draw_of_a_buffer_goes_through_its_sample_hook():
     for _ in range(3):
         rb.sample()
     assert Counting.calls >= 3
+
+
+def test_a_generator_given_to_a_sampler_drives_its_draws_as_the_buffers_does():
+    # TorchRL's PrioritizedSampler draws with the generator its buffer gave it.
+    by_buffer = TensorDictReplayBuffer(storage=LazyTensorStorage(100), sampler=PrioritizedSampler(100, 0.6, 0.4),
+                                       batch_size=8, generator=torch.Generator().manual_seed(3))
+    given = TensorDictReplayBuffer(storage=LazyTensorStorage(100), sampler=PrioritizedSampler(100, 0.6, 0.4),
+                                   batch_size=8)
+    _upstream.give_sampler_generator(given.sampler, torch.Generator().manual_seed(3))
+    for rb in (by_buffer, given):
+        rb.extend(TensorDict({"x": torch.arange(50.0)}, [50]))
+    for _ in range(3):
+        assert torch.equal(by_buffer.sample()["index"], given.sample()["index"])

@@ -40,6 +40,14 @@ def sampler_generator(sampler: Sampler) -> torch.Generator | None:
     return getattr(sampler, "_rng", None)
 
 
+def give_sampler_generator(sampler: Sampler, generator: torch.Generator | None) -> None:
+    """Hands ``sampler`` a generator as ``ReplayBuffer`` does (``sampler._rng``, which has no public setter).
+
+    :class:`~torchrl_cebp.replay.samplers.PerWorkerSampler` passes its buffer's generator on to every worker's sampler.
+    """
+    sampler._rng = generator
+
+
 class StorageView:
     """A storage view (of ``self.storage``, in its own ``shape``) that TorchRL's ``RandomSampler`` can draw from.
 

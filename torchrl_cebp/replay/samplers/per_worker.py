@@ -214,7 +214,7 @@ class PerWorkerSampler(Sampler):
     @_rng.setter
     def _rng(self, value: torch.Generator | None) -> None:
         for sampler in self.samplers:
-            sampler._rng = value
+            _upstream.give_sampler_generator(sampler, value)
 
     def worker_views(self, storage: Storage) -> list[WorkerRows]:
         """Each worker's rows of ``storage``, as the storages its sampler sees."""
