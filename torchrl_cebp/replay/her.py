@@ -44,10 +44,9 @@ class HindsightRelabel(SampleUnit):
             Defaults to ``("next", "done")``.
         relabelled_key (NestedKey or None, optional): a bool entry of the sample info telling which
             transitions were relabelled (``None`` to omit it). Defaults to ``"her_relabelled"``.
-        success_key (NestedKey or None, optional): the next-state's success flag (the Fetch envs' ``is_success``),
-            rewritten as ``reward == 0``: right for sparse rewards in {-1, 0} only, so any other reward is refused
-            while the flag is written. ``None`` leaves it as stored (the stored goal's success); a batch without it
-            is left without it. Defaults to ``("next", "is_success")``.
+        success_key (NestedKey or None, optional): the next-state's success flag (the Fetch envs' ``is_success``).
+            It tells the stored goal's success, not the relabelled goal's, so it is dropped from every drawn batch:
+            the relabelled reward tells success. ``None`` keeps it as stored. Defaults to ``("next", "is_success")``.
 
     Examples:
         >>> import torch
@@ -111,26 +110,15 @@ class HindsightRelabel(SampleUnit):
         return entries
 
     def _relabelled(
-        self, relabel: torch.Tensor, candidate: torch.Tensor, stored_goal: torch.Tensor, next_achieved: torch.Tensor,
-        with_success: bool = True,
+        self, relabel: torch.Tensor, candidate: torch.Tensor, stored_goal: torch.Tensor, next_achieved: torch.Tensor
     ) -> dict[NestedKey, torch.Tensor]:
-        """The goal, reward and success entries of transitions: ``candidate`` where ``relabel``, else their stored goal.
+        """The goal and reward entries of transitions: ``candidate`` where ``relabel``, else their stored goal.
 
         The one place both :meth:`relabel` and the buffer's :meth:`collate` build them.
         """
         goal = torch.where(relabel.unsqueeze(-1), candidate, stored_goal)
         reward = self.reward_fn(next_achieved, goal)
-        entries = {self.goal_key: goal, next_key(self.goal_key): goal, self.reward_key: reward}
-        if with_success and self.success_key is not None:
-            success = reward + 1  # 1 on success and 0 otherwise, for the sparse rewards the flag is read from
-            if bool((reward * success).any()):  # a reward other than -1 and 0
-                raise ValueError(
-                    f"HindsightRelabel writes {self.success_key!r} as reward == 0, right for sparse rewards in "
-                    f"{{-1, 0}} only, but reward_fn gave {reward.unique()[:5].tolist()}: give HindsightRelabel "
-                    "success_key=None (the flag then stays the stored goal's), or a sparse reward_fn"
-                )
-            entries[self.success_key] = success
-        return entries
+        return {self.goal_key: goal, next_key(self.goal_key): goal, self.reward_key: reward}
 
     def _draw(
         self, episodes: TensorDictBase, rows: torch.Tensor, steps: torch.Tensor, generator: torch.Generator | None,
@@ -203,12 +191,11 @@ class HindsightRelabel(SampleUnit):
             )
         self._pending.draw = None
         self._collated = True
-        # Stored episodes without the success flag get none.
-        success = None if self.success_key is None else data.get(self.success_key, None)
-        entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key),
-                                   success is not None)
+        entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key))
         for key, value in entries.items():
-            data.set(key, value.to(success.dtype) if key == self.success_key else value)
+            data.set(key, value)
+        if self.success_key is not None and data.get(self.success_key, None) is not None:
+            del data[self.success_key]  # the stored goal's success: wrong for a relabelled one
         return data
 
     # A thread-local cannot be pickled; a pending draw belongs to the thread between a buffer's expand and its
