@@ -41,8 +41,12 @@ def episode_lengths(
     if ends is None:
         n_rows, row_length = episodes.shape[:2]
         return torch.full((n_rows if rows is None else rows.numel(),), row_length, dtype=torch.long)
-    first_end = ends.to(torch.uint8).argmax(1)
-    return torch.where(ends.any(1), first_end + 1, ends.shape[1])
+    return lengths_of_ends(ends)
+
+
+def lengths_of_ends(ends: torch.Tensor) -> torch.Tensor:
+    """Valid steps of each row of ``[n, T]`` end flags (:func:`end_flags`): up to its first flag, else ``T``."""
+    return torch.where(ends.any(1), ends.to(torch.uint8).argmax(1) + 1, ends.shape[1])
 
 
 def end_flags(

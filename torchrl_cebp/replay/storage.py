@@ -12,7 +12,7 @@ from tensordict.utils import NestedKey
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage
 
 from torchrl_cebp import _upstream
-from torchrl_cebp.replay.episodes import common_length, end_flags, episode_lengths, require_time_at
+from torchrl_cebp.replay.episodes import common_length, end_flags, episode_lengths, lengths_of_ends, require_time_at
 
 # What a write of frames instead of episode rows needs.
 ASSEMBLE_FRAMES = (
@@ -103,7 +103,7 @@ class _EpisodeRows:
         if not isinstance(data, TensorDictBase):
             return self._store(cursor, data, set_cursor, exact=False)
         try:  # every check before any row changes: a refused write stores nothing
-            exact = self._check_rows(data)
+            exact, lengths = self._check_rows(data)
             for buffer in _upstream.attached_buffers(self):
                 check = getattr(buffer.sampler, "check_episodes", None)
                 if check is not None:
@@ -120,7 +120,7 @@ class _EpisodeRows:
         try:
             self._store(cursor, data, set_cursor, exact=exact)
             if known:
-                self._set_lengths(rows, episode_lengths(data, self.end_key))
+                self._set_lengths(rows, lengths)
         finally:
             if known:
                 self._write_counts[rows] += 1  # a row written twice in one write counts once: still a change
@@ -133,9 +133,9 @@ class _EpisodeRows:
         """Writes ``data`` at ``cursor`` (``exact``: it holds the stored entries, no more) as TorchRL's storage does."""
         super().set(cursor, data, set_cursor=set_cursor)
 
-    def _check_rows(self, data: TensorDictBase) -> bool:
+    def _check_rows(self, data: TensorDictBase) -> tuple[bool, torch.Tensor]:
         """Refuses a write whose rows cannot each be one episode of the storage's length; returns whether it holds
-        exactly the stored entries."""
+        exactly the stored entries, and its episodes' valid lengths."""
         if data.ndim != 2:
             raise ValueError(
                 f"episode storages take whole episodes shaped [n_episodes, T], got batch shape {list(data.shape)}: "
@@ -155,7 +155,8 @@ class _EpisodeRows:
             raise ValueError(
                 f"episodes of {data.shape[1]} steps cannot go into a storage of {self._steps}-step episodes"
             )
-        return exact
+        lengths = torch.full(data.shape[:1], data.shape[1], dtype=torch.long) if ends is None else lengths_of_ends(ends)
+        return exact, lengths
 
     def _check_keys(self, data: TensorDictBase) -> bool:
         """Refuses a write that lacks a stored entry (its rows would keep the entry's old memory); returns whether
