@@ -177,7 +177,9 @@ def importance_weight_spread(sampler: Sampler, batch: int, batches: int, seed: i
     draws), averaged over the workers; both 1 for a sampler that weights nothing.
 
     The mean is its exact expectation under the draw; the effective size is averaged over ``batches`` batches drawn
-    with the sampler's probabilities from a generator seeded with ``seed``.
+    with the sampler's probabilities from a generator seeded with ``seed``. The effective size does not change when
+    a batch's weights are all scaled alike, so the weights of every stored episode serve each batch, whatever the
+    batch's own normalisation.
     """
     shards = sampler.samplers if isinstance(sampler, PerWorkerSampler) else [sampler]
     generator = torch.Generator().manual_seed(seed)
@@ -188,9 +190,9 @@ def importance_weight_spread(sampler: Sampler, batch: int, batches: int, seed: i
         if weights is None:
             return {"is_mean": 1.0, "is_ess": 1.0}
         means.append(expected_batch_weights(p, weights, batch).sum())
-        for rows in torch.multinomial(p, batch * batches, replacement=True, generator=generator).view(batches, batch):
-            w = shard.importance_weights(p[rows], shard.n_episodes).double()
-            spreads.append(w.sum().square() / (batch * w.square().sum()))
+        rows = torch.multinomial(p, batch * batches, replacement=True, generator=generator).view(batches, batch)
+        w = weights.double()[rows]
+        spreads.append((w.sum(1).square() / (batch * w.square().sum(1))).mean())
     return {"is_mean": torch.stack(means).mean().item(), "is_ess": torch.stack(spreads).mean().item()}
 
 

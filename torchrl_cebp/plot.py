@@ -798,10 +798,10 @@ def plot_against_parameter(
 
     drawn: dict[int, dict[str, dict]] = {}
     for n in epochs:
-        parameter = {value: seeds_summary(values_at_epoch(curves, n)) for value, curves in sorted(by_value.items())
-                     if values_at_epoch(curves, n)}
-        reference_levels = {reference: seeds_summary(values_at_epoch(curves, n))
-                            for reference, curves in reference_curves.items() if values_at_epoch(curves, n)}
+        parameter = {value: seeds_summary(values) for value, curves in sorted(by_value.items())
+                     if (values := values_at_epoch(curves, n))}
+        reference_levels = {reference: seeds_summary(values) for reference, curves in reference_curves.items()
+                            if (values := values_at_epoch(curves, n))}
         drawn[n] = {"parameter": parameter, "references": reference_levels}
     if not any(drawn[n]["parameter"] for n in drawn):
         raise ValueError(f"no run of {parameter_pattern!r} in {panel} has reached any of epochs={list(epochs)}")
@@ -868,9 +868,9 @@ def iqm_cell(per_seed: list[float], seeds_in_total: int) -> str:
     """
     if not per_seed:
         return "-"
-    low, high = stratified_bootstrap_ci(per_seed)
-    seeds = f" ({seed_count(len(per_seed))})" if len(per_seed) < seeds_in_total else ""
-    return f"{iqm(per_seed):.2f} [{low:.2f}, {high:.2f}]{seeds}"
+    mean, low, high, seeds = seeds_summary(per_seed)
+    count = f" ({seed_count(seeds)})" if seeds < seeds_in_total else ""
+    return f"{mean:.2f} [{low:.2f}, {high:.2f}]{count}"
 
 
 def improvement_cell(per_seed: list[float], baseline: list[float]) -> str:
