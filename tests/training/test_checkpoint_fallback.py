@@ -5,6 +5,7 @@ import re
 import subprocess
 import sys
 
+import hydra
 import pytest
 import torch
 
@@ -12,7 +13,7 @@ from tests.tiny_run import REPO, TINY, TINY_RUN, config, copy_run, rows
 from torchrl_cebp.training import train
 from torchrl_cebp.training.checkpoint import (
     BEST_POLICY_NAME, CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME, BestPolicy, RunCheckpoints, UnreadableFileError,
-    load_file,
+    load_checkpoint, load_file, save_checkpoint,
 )
 from torchrl_cebp.training.config import with_legacy_defaults
 
@@ -132,3 +133,10 @@ def test_a_checkpoint_naming_the_samplers_former_module_resumes_with_the_same_sa
     saved = {"sampler": {"_target_": "torchrl_cebp.samplers.InitialCEBPSampler", "beta": 0.7}}
     assert with_legacy_defaults(saved)["sampler"] == {
         "_target_": "torchrl_cebp.replay.samplers.InitialCEBPSampler", "beta": 0.7}
+
+
+def test_every_reader_of_an_older_checkpoint_gets_the_samplers_current_module(tmp_path):
+    saved = {"epoch": 3, "config": {"sampler": {"_target_": "torchrl_cebp.samplers.InitialCEBPSampler", "beta": 0.7}}}
+    save_checkpoint(saved, tmp_path)
+    sampler = load_checkpoint(tmp_path)["config"]["sampler"]  # what compare_draws and diagnose_franka build from
+    assert hydra.utils.instantiate(sampler).beta == 0.7

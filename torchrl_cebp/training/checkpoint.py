@@ -27,7 +27,7 @@ from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl_cebp import _upstream
 from torchrl_cebp.agents import ObsGoalNormalizer, make_actor
 from torchrl_cebp.training.builders import Agent
-from torchrl_cebp.training.config import ConfigError, check_same_run
+from torchrl_cebp.training.config import ConfigError, check_same_run, with_legacy_defaults
 
 CHECKPOINT_NAME = "checkpoint.pt"
 PREVIOUS_CHECKPOINT_NAME = "checkpoint_previous.pt"
@@ -145,7 +145,9 @@ class RunCheckpoints:
         return self.newest
 
     def load(self, map_location: torch.device | str = "cpu") -> dict[str, Any]:
-        """The newest checkpoint that loads (``weights_only=True``).
+        """The newest checkpoint that loads (``weights_only=True``), its config as a run would read it today
+        (:func:`~torchrl_cebp.training.config.with_legacy_defaults`: an older run's sampler module, and the keys
+        added since, set to what that run did), so that every reader of it builds what the run ran.
 
         Args:
             map_location (torch.device or str, optional): where the tensors are loaded. Defaults to ``"cpu"``.
@@ -153,6 +155,12 @@ class RunCheckpoints:
         Raises:
             UnreadableFileError: neither checkpoint loads; the message names both files and why.
         """
+        state = self._load(map_location)
+        if "config" in state:
+            state["config"] = with_legacy_defaults(state["config"])
+        return state
+
+    def _load(self, map_location: torch.device | str) -> dict[str, Any]:
         try:
             return load_file(self.newest, map_location)
         except UnreadableFileError as newest_error:
