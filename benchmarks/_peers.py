@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import itertools
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -53,6 +55,39 @@ class Episodes:
     def reward(self) -> np.ndarray:
         """The stored (non-relabelled) sparse reward for each step, [n, T]."""
         return -(np.linalg.norm(self.ag[:, 1:] - self.g, axis=-1) > DISTANCE_THRESHOLD).astype(np.float32)
+
+
+def elapsed_ms(fn: Callable[[], object]) -> float:
+    """How long ``fn()`` takes, in milliseconds."""
+    start = time.perf_counter()
+    fn()
+    return (time.perf_counter() - start) * 1e3
+
+
+def sparse_reward(achieved, goal):
+    """HER's reward at ``DISTANCE_THRESHOLD``, as our relabelling computes it: 0 on reaching the goal, else -1."""
+    import torch
+
+    return -(torch.linalg.vector_norm(achieved - goal, dim=-1, keepdim=True) > DISTANCE_THRESHOLD).float()
+
+
+def our_samplers(capacity: int) -> dict[str, tuple[str, dict]]:
+    """Our samplers by name: the class in ``torchrl_cebp.replay.samplers`` and its arguments for FetchPush-shaped
+    episodes (the env config's settings) in a storage of ``capacity`` transitions, by which PER's trees are sized."""
+    from omegaconf import OmegaConf
+
+    push = OmegaConf.load(Path(__file__).parents[1] / "conf" / "env" / "push.yaml")
+    workspace = tuple(map(tuple, push.gripper_workspace))
+    return {
+        "uniform": ("UniformEpisodeSampler", {}),
+        "cebp_paper": ("CEBPSampler", {"temperature": push.cebp_temperature}),
+        "cebp_released": ("ReleasedCEBPSampler", {"k": push.cebp_released_k, "workspace": workspace}),
+        "cebp_initial": ("InitialCEBPSampler", {"workspace": workspace}),
+        "cper": ("CPERSampler", {}),
+        "ebp": ("EBPSampler", {}),
+        "mep": ("MEPSampler", {}),
+        "per": ("PERSampler", {"capacity": capacity}),
+    }
 
 
 def make_episodes(n: int, seed: int, T: int = EPISODE_LENGTH) -> Episodes:

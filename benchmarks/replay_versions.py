@@ -18,14 +18,15 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from collections.abc import Callable
 from pathlib import Path
 
 import torch
-from omegaconf import OmegaConf
 
-from _peers import BATCH_SIZE, FUTURE_P, build_torchrl_her, episodes_to_tensordict, make_episodes
+from _peers import (
+    BATCH_SIZE, FUTURE_P, build_torchrl_her, elapsed_ms, episodes_to_tensordict, make_episodes, our_samplers,
+    sparse_reward,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 POOL_EPISODES = 32
@@ -46,40 +47,22 @@ def import_commit(commit: str, into: Path):
     return torchrl_cebp_before
 
 
-def sampler_arguments(capacity: int) -> dict[str, tuple[str, dict]]:
-    """Each sampler's class name and arguments, as benchmarks/sampling.py builds them (FetchPush's settings)."""
-    push = OmegaConf.load(ROOT / "conf" / "env" / "push.yaml")
-    workspace = tuple(map(tuple, push.gripper_workspace))
-    return {
-        "uniform": ("UniformEpisodeSampler", {}),
-        "cebp": ("CEBPSampler", {"temperature": push.cebp_temperature}),
-        "cebp_released": ("ReleasedCEBPSampler", {"k": push.cebp_released_k, "workspace": workspace}),
-        "cebp_initial": ("InitialCEBPSampler", {"workspace": workspace}),
-        "cper": ("CPERSampler", {}),
-        "ebp": ("EBPSampler", {}),
-        "mep": ("MEPSampler", {}),
-        "per": ("PERSampler", {"capacity": capacity}),
-    }
-
-
-def reward(achieved: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-    return -(torch.linalg.vector_norm(achieved - goal, dim=-1, keepdim=True) > 0.05).float()
-
-
 Draw = Callable[[], object]
 
 
 def build(package, cls_name: str, kwargs: dict, stored, pool, workers: int) -> tuple[Draw, Callable[[], object]]:
-    """A filled buffer of ``package``'s: its draw, and a write of the next pool episodes (one per env of a cycle)."""
+    """A filled buffer of ``package``'s: its draw, and a write of the next pool episodes (one per env of a cycle).
+
+    With several workers ``kwargs`` are each worker's sampler's (a PER's capacity: its share, as training sizes it).
+    """
     samplers = package.replay.samplers
     if workers == 1:
         sampler = getattr(samplers, cls_name)(**kwargs)
-    else:  # each worker's PER holds its share of the transitions
-        share = {**kwargs, "capacity": kwargs["capacity"] // workers} if "capacity" in kwargs else kwargs
-        sampler = samplers.PerWorkerSampler(*[getattr(samplers, cls_name)(**share) for _ in range(workers)],
+    else:
+        sampler = samplers.PerWorkerSampler(*[getattr(samplers, cls_name)(**kwargs) for _ in range(workers)],
                                             episodes_per_worker=EPISODES_PER_WORKER)
     capacity = len(stored) * stored.u.shape[1]
-    her = package.replay.HindsightRelabel(reward, future_p=FUTURE_P, strategy="future")
+    her = package.replay.HindsightRelabel(sparse_reward, future_p=FUTURE_P, strategy="future")
     rb = package.replay.make_replay_buffer(sampler, her, capacity=capacity, batch_size=BATCH_SIZE * workers)
     rb.extend(episodes_to_tensordict(stored))
     if hasattr(sampler, "refit"):
@@ -87,12 +70,6 @@ def build(package, cls_name: str, kwargs: dict, stored, pool, workers: int) -> t
     cycle = 1 if workers == 1 else workers * EPISODES_PER_WORKER
     fresh = itertools.cycle([episodes_to_tensordict(pool.slice(i, i + cycle)) for i in range(0, len(pool), cycle)])
     return rb.sample, lambda: rb.extend(next(fresh))
-
-
-def elapsed_ms(fn: Callable[[], object]) -> float:
-    start = time.perf_counter()
-    fn()
-    return (time.perf_counter() - start) * 1e3
 
 
 def main() -> None:
@@ -105,16 +82,16 @@ def main() -> None:
                         help="per-worker replay of this many workers (PerWorkerSampler, the paper's scale: 8): draws "
                              "of 256 per worker, writes of 2 episodes per worker; no TorchRL column")
     args = parser.parse_args()
-    cycle = args.workers * EPISODES_PER_WORKER
-    if args.workers > 1 and args.episodes % cycle:
-        parser.error(f"--episodes must be a multiple of {cycle} with --workers {args.workers}, got {args.episodes}")
     torch.set_num_threads(1)
-    import torchrl_cebp.replay.samplers  # noqa: F401  (the package's samplers, as the other commit's)
-    import torchrl_cebp
+    import torchrl_cebp.replay.samplers  # the package's samplers, as the other commit's
+    from torchrl_cebp.training.builders import worker_share
 
     data = make_episodes(args.episodes + POOL_EPISODES, seed=0)
     stored, pool = data.slice(0, args.episodes), data.slice(args.episodes, len(data))
-    arguments = sampler_arguments(args.episodes * stored.u.shape[1])
+    capacity = args.episodes * stored.u.shape[1]
+    if args.workers > 1:  # a PER's trees are sized by its worker's share
+        capacity = worker_share(capacity, stored.u.shape[1], args.workers, EPISODES_PER_WORKER)
+    arguments = our_samplers(capacity)
     names = args.samplers or list(arguments)
     unknown = sorted(set(names) - set(arguments))
     if unknown:

@@ -16,14 +16,12 @@ import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import torch
-from omegaconf import OmegaConf
 
 from _peers import (
-    BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, episodes_to_tensordict, make_episodes,
-    require_stable_baselines3,
+    BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, elapsed_ms, episodes_to_tensordict,
+    make_episodes, our_samplers, require_stable_baselines3, sparse_reward,
 )
 
 # Episodes the write timings cycle through; fresh data, never the stored episodes again.
@@ -40,12 +38,6 @@ class Timing:
     write_ms: float
 
 
-def _elapsed_ms(fn: Callable[[], object]) -> float:
-    start = time.perf_counter()
-    fn()
-    return (time.perf_counter() - start) * 1e3
-
-
 def writes_needed(repeats: int) -> int:
     return WARMUP + 2 * repeats
 
@@ -55,12 +47,12 @@ def measure(draw: Draw, write: Write, repeats: int) -> Timing:
     for _ in range(WARMUP):
         draw()
         write()
-    draws = [_elapsed_ms(draw) for _ in range(repeats)]
+    draws = [elapsed_ms(draw) for _ in range(repeats)]
     after_write = []
     for _ in range(repeats):
         write()
-        after_write.append(_elapsed_ms(draw))
-    writes = [_elapsed_ms(write) for _ in range(repeats)]
+        after_write.append(elapsed_ms(draw))
+    writes = [elapsed_ms(write) for _ in range(repeats)]
     return Timing(statistics.median(draws), statistics.median(after_write), statistics.median(writes))
 
 
@@ -73,31 +65,13 @@ def _our_methods() -> dict[str, Builder]:
         print(f"note: our samplers are skipped, torchrl_cebp is not importable ({err})")
         return {}
 
-    def reward_fn(ag: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
-        return -(torch.linalg.vector_norm(ag - g, dim=-1, keepdim=True) > 0.05).float()
-
-    push = OmegaConf.load(Path(__file__).parents[1] / "conf" / "env" / "push.yaml")
-    push_workspace = tuple(map(tuple, push.gripper_workspace))
-
-    # name -> (class, its kwargs given the capacity in transitions); PER's trees are sized by it.
-    factories: dict[str, tuple[str, Callable[[int], dict]]] = {
-        "ours_uniform": ("UniformEpisodeSampler", lambda capacity: {}),
-        # The synthetic episodes are FetchPush-shaped, as is the released_cebp peer.
-        "ours_cebp_paper": ("CEBPSampler", lambda capacity: {"temperature": push.cebp_temperature}),
-        "ours_cebp_released": ("ReleasedCEBPSampler", lambda capacity: {"k": push.cebp_released_k, "workspace": push_workspace}),
-        "ours_cebp_initial": ("InitialCEBPSampler", lambda capacity: {"workspace": push_workspace}),
-        "ours_cper": ("CPERSampler", lambda capacity: {}),
-        "ours_ebp": ("EBPSampler", lambda capacity: {}),
-        "ours_mep": ("MEPSampler", lambda capacity: {}),
-        "ours_per": ("PERSampler", lambda capacity: {"capacity": capacity}),
-    }
-
-    def builder(cls_name: str, kwargs: Callable[[int], dict]) -> Builder:
+    def builder(name: str) -> Builder:
         def build(stored: Episodes, pool: Episodes, n_writes: int) -> tuple[Draw, Write]:
             capacity = len(stored) * EPISODE_LENGTH
+            cls_name, kwargs = our_samplers(capacity)[name]
             rb = make_replay_buffer(
-                getattr(samplers, cls_name)(**kwargs(capacity)),
-                HindsightRelabel(reward_fn, future_p=FUTURE_P, strategy="future"),
+                getattr(samplers, cls_name)(**kwargs),
+                HindsightRelabel(sparse_reward, future_p=FUTURE_P, strategy="future"),
                 capacity=capacity,
                 batch_size=BATCH_SIZE,
             )
@@ -112,11 +86,11 @@ def _our_methods() -> dict[str, Builder]:
         return build
 
     methods = {}
-    for name, (cls_name, kwargs) in factories.items():
+    for name, (cls_name, _) in our_samplers(0).items():  # (the capacity only sizes PER's trees)
         if hasattr(samplers, cls_name):
-            methods[name] = builder(cls_name, kwargs)
+            methods[f"ours_{name}"] = builder(name)
         else:
-            print(f"note: {name} is skipped, torchrl_cebp.replay.samplers has no {cls_name}")
+            print(f"note: ours_{name} is skipped, torchrl_cebp.replay.samplers has no {cls_name}")
     return methods
 
 
