@@ -1,4 +1,6 @@
 """The evaluation command: success rate of a checkpoint and a video of its episodes."""
+import re
+
 import imageio.v3 as iio
 import numpy as np
 import pytest
@@ -6,6 +8,7 @@ import torch
 from tensordict import TensorDict
 
 from tests.tiny_run import config, copy_run
+from torchrl_cebp.agents import SHIPPED_AGENTS
 from torchrl_cebp.envs import make_franka, make_touch_fetch
 from torchrl_cebp.evaluate import main, record_video, success_rate
 from torchrl_cebp.sim2real import SHIPPED_POLICY
@@ -33,8 +36,36 @@ def test_the_command_prints_the_success_rate_a_plain_loop_measures(capsys):
     main([str(SHIPPED_POLICY), "--episodes", "4"])  # success_rate seeds simulation i with 1234 + i
     expected = plain_gymnasium_success_rate(
         load_policy(SHIPPED_POLICY), lambda: make_franka(max_episode_steps=50), range(1234, 1238))
-    assert capsys.readouterr().out == f"success rate over 4 episodes: {expected:.3f}\n"
+    assert capsys.readouterr().out == f"{SHIPPED_POLICY}: success rate over 4 episodes: {expected:.3f}\n"
     assert expected >= 0.75  # the shipped policy places the cube
+    main(["--task", "franka_pick_place", "--episodes", "4"])  # the same file, with no path to type
+    assert capsys.readouterr().out == f"{SHIPPED_POLICY}: success rate over 4 episodes: {expected:.3f}\n"
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        ([], "give either a policy .* or --task, not both or neither"),
+        (["runs/x", "--task", "push"], "give either a policy .* or --task, not both or neither"),
+        (["--task", "slide"], r"invalid choice: 'slide' \(choose from .*franka_pick_place.*pick_place.*push"),
+        (["--task", "push", "--video", "push.avi"], r"unknown format '\.avi'; valid: \['\.mp4', '\.gif'\]"),
+    ],
+)
+def test_the_command_refuses_a_wrong_choice_of_policy_or_video_by_name(capsys, argv, message):
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    assert re.search(message, capsys.readouterr().err)
+
+
+def test_a_task_whose_agent_is_missing_names_the_agents_this_installation_has(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(SHIPPED_AGENTS, "push", tmp_path / "push.pt")  # an installation without the Push agent
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--task", "push"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2
+    assert f"the push agent is not in this installation ({tmp_path / 'push.pt'} is missing); shipped here: [" in err
+    assert "'franka_pick_place'" in err and "'push'" not in err.split("shipped here:")[1]
 
 
 def test_success_rate_on_the_checkpoints_own_robot_equals_a_plain_gymnasium_loop(tmp_path):

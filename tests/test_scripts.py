@@ -226,3 +226,46 @@ def test_the_sim2real_training_script_resumes_the_shipped_policys_run_with_its_s
         cfg = compose("config", overrides=overrides)
     validate_config(cfg)
     assert cfg.replay.capacity_per == "total" and cfg.resume and cfg.workers == 8
+
+
+def test_ship_agent_checks_the_runs_command_and_ships_only_at_the_tasks_bar(tiny_run, tmp_path, monkeypatch):
+    from tests.tiny_run import TINY, TINY_RUN
+    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS
+    from torchrl_cebp.training import load_policy
+    from torchrl_cebp.training.config import ConfigError
+
+    ship = load_module(REPO / "scripts" / "ship_agent.py")
+    policy = tiny_run / "best_policy.pt"
+    with pytest.raises(FileNotFoundError, match=r"\.hydra/overrides\.yaml is missing: pass the run's train\.py overrides"):
+        ship.run_overrides(tiny_run)  # trained from Python, not by train.py
+    with pytest.raises(ValueError, match="was trained on 'push', not 'pick_place'"):
+        ship.card_state("pick_place", policy, [*TINY, *TINY_RUN], 2)
+    with pytest.raises(ConfigError, match="batch_size=16, this config has batch_size=256"):
+        ship.card_state("push", policy, list(TINY_RUN), 2)  # a command that would not rebuild the run
+    state = ship.card_state("push", policy, [*TINY, *TINY_RUN], 2)
+    card = state["card"]
+    assert card["command"] == "python train.py " + " ".join([*TINY, *TINY_RUN])
+    assert card["epochs"] == 2 and card["sampler"] == "UniformEpisodeSampler, HER 'future'" and card["episodes"] == 2
+    with pytest.raises(SystemExit, match=r"0\.500 is below the push bar of 0\.95: not shipped"):
+        ship.ship("push", {**state, "card": {**card, "success": 0.5}}, force=False)
+
+    monkeypatch.setitem(SHIPPED_AGENTS, "push", tmp_path / "package" / "push.pt")
+    monkeypatch.setattr(ship, "REPO", tmp_path)
+    page = tmp_path / "agents.md"
+    page.write_text(f"# Agents\n\n{ship.CARDS_START}\nold\n{ship.CARDS_END}\n\nmore\n")
+    monkeypatch.setattr(ship, "AGENTS_PAGE", page)
+    ship.ship("push", state, force=True)
+    assert SHIPPED_AGENTS["push"].stat().st_size < 1_000_000 and load_policy(SHIPPED_AGENTS["push"]) is not None
+    assert torch.load(SHIPPED_AGENTS["push"], weights_only=True)["card"] == card
+    strip = iio_read(tmp_path / "docs" / "img" / "agent_push_frames.png")
+    assert strip.shape == (180, 6 * 240, 3)
+    assert len(iio_read(tmp_path / "docs" / "img" / "agent_push.mp4")) == 2 * 51
+    text = page.read_text()
+    assert "old" not in text and text.endswith(f"{ship.CARDS_END}\n\nmore\n")
+    assert f"## push: success {card['success']:.2f} over 2 fresh episodes" in text
+
+
+def iio_read(path: Path):
+    import imageio.v3 as iio
+
+    return iio.imread(path)

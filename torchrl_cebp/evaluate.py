@@ -1,10 +1,11 @@
 """Evaluate a trained policy: success rate over N deterministic episodes, and a video of a few.
 
-    python -m torchrl_cebp.evaluate runs/push-standard/cebp/default/seed0 --episodes 50 --video push.mp4
+    python -m torchrl_cebp.evaluate --task push --episodes 100 --video push.mp4     # the agent shipped for Push
+    python -m torchrl_cebp.evaluate runs/push-standard/cebp/default/seed0 --episodes 50
 
-The policy is a run directory, its checkpoint.pt, or a policy file (policy.pt). The env (task and
-goal space) comes from the file's config; ``--video`` writes an MP4 or a
-GIF (by extension) rendered offscreen (``MUJOCO_GL=osmesa`` on a CPU-only machine).
+The policy is a shipped agent (``--task``), a run directory, its checkpoint.pt, or a policy file (policy.pt). The env
+(task and goal space) comes from the file's config; ``--video`` writes an MP4 or a GIF (by extension) rendered
+offscreen (``MUJOCO_GL=osmesa`` on a CPU-only machine).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from torchrl_cebp.agents.shipped import SHIPPED_AGENTS, shipped_agent
 from torchrl_cebp.training.checkpoint import UnreadableFileError, read_policy
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
@@ -50,6 +52,32 @@ def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -
 
 
 @torch.no_grad()
+def render_episodes(
+    checkpoint: str | Path, episodes: int = 2, seed: int = 1234, size: tuple[int, int] = (480, 360)
+) -> list[np.ndarray]:
+    """The RGB frames of ``episodes`` deterministic episodes, one after the other, rendered offscreen.
+
+    Args:
+        checkpoint (str or Path): a run directory, its ``checkpoint.pt``, or a policy file.
+        episodes (int, optional): the episodes rendered. Defaults to ``2``.
+        seed (int, optional): seeds the env. Defaults to ``1234``.
+        size (tuple of int, optional): the frames' ``(width, height)``. Defaults to ``(480, 360)``.
+    """
+    policy, env = _policy_and_env(checkpoint, seed=seed, render_size=size)
+    frames = []
+    try:
+        for _ in range(episodes):
+            td = env.reset()
+            frames.append(env.render())
+            for _ in range(env.max_episode_steps):
+                td = env.step(policy(td))
+                frames.append(env.render())
+                td = td["next"].exclude("reward", "done", "terminated", "truncated")
+    finally:
+        env.close()
+    return frames
+
+
 def record_video(
     checkpoint: str | Path,
     path: str | Path,
@@ -72,19 +100,7 @@ def record_video(
         the video's path.
     """
     path = video_path(path)
-    policy, env = _policy_and_env(checkpoint, seed=seed, render_size=size)
-    frames = []
-    try:
-        for _ in range(episodes):
-            td = env.reset()
-            frames.append(env.render())
-            for _ in range(env.max_episode_steps):
-                td = env.step(policy(td))
-                frames.append(env.render())
-                td = td["next"].exclude("reward", "done", "terminated", "truncated")
-    finally:
-        env.close()
-    return write_video(frames, path, fps)
+    return write_video(render_episodes(checkpoint, episodes, seed, size), path, fps)
 
 
 def video_path(path: str | Path) -> Path:
@@ -133,14 +149,21 @@ def write_video(frames: list[np.ndarray], path: str | Path, fps: int = 25) -> Pa
 
 
 def main(argv: list[str] | None = None) -> None:
-    """The command line: ``python -m torchrl_cebp.evaluate RUN [--episodes N] [--video PATH]``.
+    """The command line: ``python -m torchrl_cebp.evaluate (RUN | --task TASK) [--episodes N] [--video PATH]``.
 
     Args:
         argv (list of str, optional): the arguments; ``None`` reads ``sys.argv``. Defaults to ``None``.
     """
     os.environ.setdefault("MUJOCO_GL", "osmesa")
-    parser = argparse.ArgumentParser(description="Success rate of a checkpoint, and a video of a few episodes.")
-    parser.add_argument("checkpoint", help="a run directory, its checkpoint.pt, or a policy file (policy.pt)")
+    parser = argparse.ArgumentParser(
+        description="Success rate of a trained policy (a shipped agent, or your own run), and a video of a few episodes."
+    )
+    parser.add_argument(
+        "checkpoint", nargs="?", help="a run directory, its checkpoint.pt, or a policy file (policy.pt)"
+    )
+    parser.add_argument(
+        "--task", choices=sorted(SHIPPED_AGENTS), help="evaluate the agent shipped for this task instead of a file"
+    )
     parser.add_argument("--episodes", type=int, default=10, help="test episodes for the success rate")
     parser.add_argument("--video", help="write a video of a few episodes here (.mp4 or .gif)")
     parser.add_argument("--video-episodes", type=int, default=2)
@@ -148,13 +171,21 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f"--episodes must be at least 1, got {args.episodes}")
+    if (args.checkpoint is None) == (args.task is None):
+        parser.error("give either a policy (a run directory or a file) or --task, not both or neither")
     try:
-        rate = success_rate(args.checkpoint, args.episodes, args.seed)
+        if args.video:
+            video_path(args.video)  # a wrong extension is refused before the episodes run, not after
+    except ValueError as error:
+        parser.error(str(error))
+    try:
+        checkpoint = shipped_agent(args.task) if args.task else args.checkpoint
+        rate = success_rate(checkpoint, args.episodes, args.seed)
     except (FileNotFoundError, UnreadableFileError) as error:
         parser.exit(2, f"error: {error}\n")
-    print(f"success rate over {args.episodes} episodes: {rate:.3f}")
+    print(f"{checkpoint}: success rate over {args.episodes} episodes: {rate:.3f}")
     if args.video:
-        print(f"wrote {record_video(args.checkpoint, args.video, args.video_episodes, args.seed)}")
+        print(f"wrote {record_video(checkpoint, args.video, args.video_episodes, args.seed)}")
 
 
 if __name__ == "__main__":

@@ -5,19 +5,18 @@ Other trained policies load with ``torchrl_cebp.training.load_policy``.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 
+from torchrl_cebp.agents.shipped import SHIPPED_AGENTS
 from torchrl_cebp.envs.layout import FETCH_OBSERVATION as OBS
 
 __all__ = ["SHIPPED_POLICY", "ScriptedPickPlace"]
 
-# The Franka pick-and-place policy trained with CEBP (docs/results/sim2real/): actor and observation
-# normaliser only, loaded with weights_only=True by torchrl_cebp.training.load_policy.
-SHIPPED_POLICY = Path(__file__).parent / "policies" / "franka_pick_place_cebp.pt"
+# The Franka pick-and-place policy trained with CEBP (docs/results/sim2real/).
+SHIPPED_POLICY = SHIPPED_AGENTS["franka_pick_place"]
 
 
 class ScriptedPickPlace(TensorDictModuleBase):

@@ -1,0 +1,150 @@
+"""Ships a trained Fetch agent: scores it on fresh episodes, and if it clears its task's bar, writes it into the package
+with its model card, a video and a frame strip.
+
+The policy file (a run's ``best_policy.pt`` or ``policy.pt``) is scored over ``--episodes`` fresh episodes with
+``evaluate``'s measure, from seeds the trainer's test episodes never used. At or above the task's bar
+(``torchrl_cebp.agents.SHIPPING_BAR``: 0.85 for PickAndPlace, 0.95 for Push) it is written to the package
+(``torchrl_cebp.agents.SHIPPED_AGENTS``) with a model card: the sampler, the training command, the code commit and
+training time of its run (from the run's ``progress.csv``), and the score. The card's command is the run's ``train.py``
+overrides (its ``.hydra/overrides.yaml``, or ``--overrides``), checked against the run's checkpoint: it rebuilds the run.
+Then it writes ``docs/img/agent_<task>.mp4`` (two episodes), ``docs/img/agent_<task>_frames.png`` (one episode, six
+frames) and the cards of every shipped agent into ``docs/agents.md``.
+
+    .venv/bin/python scripts/ship_agent.py push runs/push-standard/ebp/paper-per_worker/seed0/best_policy.pt
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+AGENTS_PAGE = REPO / "docs" / "agents.md"
+CARDS_START, CARDS_END = "<!-- model cards: written by scripts/ship_agent.py -->", "<!-- end of model cards -->"
+# The trainer seeds its test episodes from a hash of (seed, epoch) (derive_seed): a run of plain seeds misses them.
+FRESH_SEED = 10_000
+STRIP_FRAMES = 6
+
+
+def main(argv: list[str] | None = None) -> int:
+    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS
+
+    fetch_tasks = sorted(task for task in SHIPPED_AGENTS if not task.startswith("franka"))
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("task", choices=fetch_tasks, help="the task the agent ships for")
+    parser.add_argument("policy", type=Path, help="the run's best_policy.pt or policy.pt")
+    parser.add_argument("--overrides", nargs="+", metavar="OVERRIDE",
+                        help="the run's train.py overrides, checked against its checkpoint (default: the run folder's "
+                        ".hydra/overrides.yaml)")
+    parser.add_argument("--episodes", type=int, default=100, help="fresh episodes for the score")
+    parser.add_argument("--force", action="store_true", help="ship even below the task's bar")
+    args = parser.parse_args(argv)
+    os.environ.setdefault("MUJOCO_GL", "osmesa")
+    try:
+        overrides = args.overrides or run_overrides(args.policy.parent)
+        state = card_state(args.task, args.policy, overrides, args.episodes)
+    except (ValueError, FileNotFoundError) as error:
+        parser.exit(2, f"error: {error}\n")
+    ship(args.task, state, args.force)
+    return 0
+
+
+def run_overrides(run_dir: Path) -> list[str]:
+    """The ``train.py`` overrides Hydra saved in the run folder."""
+    from omegaconf import OmegaConf
+
+    path = run_dir / ".hydra" / "overrides.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} is missing: pass the run's train.py overrides with --overrides")
+    return list(OmegaConf.load(path))
+
+
+def card_state(task: str, policy: Path, overrides: list[str], episodes: int) -> dict:
+    """The policy file's state with its ``card``, after the checks that it is the task's agent and its command."""
+    from hydra import compose, initialize_config_dir
+
+    from torchrl_cebp.evaluate import success_rate
+    from torchrl_cebp.training.checkpoint import RunCheckpoints, read_policy_state
+    from torchrl_cebp.training.config import check_same_run
+    from torchrl_cebp.training.metrics import CSV_NAME
+
+    state = read_policy_state(policy)
+    if state["env"]["task"] != task:
+        raise ValueError(f"{policy} was trained on {state['env']['task']!r}, not {task!r}")
+    run_dir = policy.parent
+    saved = RunCheckpoints(run_dir).load()["config"]
+    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
+        check_same_run(saved, compose("config", overrides=overrides))
+    with open(run_dir / CSV_NAME, newline="") as file:
+        rows = list(csv.DictReader(file))
+    score = success_rate(policy, episodes, FRESH_SEED)
+    print(f"[ship] {policy}: {episodes} fresh episodes (seeds {FRESH_SEED}+): success {score:.3f}")
+    last = rows[-1]
+    card = {
+        "sampler": f"{saved['sampler']['_target_'].rsplit('.', 1)[1]}, HER '{saved['replay']['strategy']}'",
+        "command": " ".join(["python train.py", *overrides]),
+        "code_commit": last["code_commit"],
+        "epochs": len(rows),
+        "training_hours": float(last["wall_s"]) / 3600,
+        "cpu": f"one CPU thread ({last.get('cpu_capability') or 'unknown'})",
+        "epoch": int(state["epoch"]),
+        "test_success": float(state["test_success"]),
+        "success": score,
+        "episodes": episodes,
+        "seed": FRESH_SEED,
+    }
+    return {**state, "card": card}
+
+
+def ship(task: str, state: dict, force: bool) -> None:
+    """Writes the policy file, its video and frame strip, and the agents page's cards; refuses below the bar."""
+    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS, SHIPPING_BAR
+    from torchrl_cebp.evaluate import render_episodes, write_video
+    from torchrl_cebp.training.checkpoint import save_policy
+
+    score, bar = state["card"]["success"], SHIPPING_BAR[task]
+    if score < bar and not force:
+        sys.exit(f"[ship] {score:.3f} is below the {task} bar of {bar}: not shipped (--force ships it anyway)")
+    path = SHIPPED_AGENTS[task]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_policy(state, path)
+    print(f"[ship] wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
+    frames = render_episodes(path, episodes=2, seed=FRESH_SEED)
+    print(f"[ship] wrote {write_video(frames, REPO / 'docs' / 'img' / f'agent_{task}.mp4')}")
+    print(f"[ship] wrote {write_frame_strip(frames[: len(frames) // 2], REPO / 'docs' / 'img' / f'agent_{task}_frames.png')}")
+    write_cards(AGENTS_PAGE)
+    print(f"[ship] wrote the model cards into {AGENTS_PAGE}")
+
+
+def write_frame_strip(frames: list[np.ndarray], path: Path) -> Path:
+    """:data:`STRIP_FRAMES` frames of one episode, evenly spaced from its first to its last, side by side, half size."""
+    import imageio.v3 as iio
+
+    picks = np.linspace(0, len(frames) - 1, STRIP_FRAMES).round().astype(int)
+    iio.imwrite(path, np.concatenate([frames[i][::2, ::2] for i in picks], axis=1))
+    return path
+
+
+def write_cards(page: Path) -> None:
+    """Replaces the text between the page's card markers with the cards of every shipped Fetch agent."""
+    import torch
+
+    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS, model_card
+
+    cards = [
+        model_card(task, torch.load(path, map_location="cpu", weights_only=True))
+        for task, path in sorted(SHIPPED_AGENTS.items())
+        if path.is_file() and not task.startswith("franka")
+    ]
+    text = page.read_text()
+    head, rest = text.split(CARDS_START)
+    tail = rest.split(CARDS_END)[1]
+    page.write_text(f"{head}{CARDS_START}\n\n" + "\n".join(cards) + f"\n{CARDS_END}{tail}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,83 @@
+"""The trained agents that ship inside the package, one per task, and the model card each file carries."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+__all__ = ["SHIPPED_AGENTS", "SHIPPING_BAR", "model_card", "shipped_agent"]
+
+_PACKAGE = Path(__file__).parents[1]
+
+# Actor and observation normaliser only (a policy file of torchrl_cebp.training.save_policy), loaded with
+# weights_only=True. The Fetch agents are robot A's (the mocap Fetch on the standard goal space, the paper's figure).
+SHIPPED_AGENTS: dict[str, Path] = {
+    "pick_place": _PACKAGE / "agents" / "policies" / "pick_place.pt",
+    "push": _PACKAGE / "agents" / "policies" / "push.pt",
+    "franka_pick_place": _PACKAGE / "sim2real" / "policies" / "franka_pick_place_cebp.pt",
+}
+
+# The success over 100 fresh episodes an agent needs before it ships (the Franka one: of the camera loop's length).
+SHIPPING_BAR: dict[str, float] = {"pick_place": 0.85, "push": 0.95, "franka_pick_place": 0.8}
+
+
+def shipped_agent(task: str) -> Path:
+    """The policy file of the agent shipped for ``task``, for ``evaluate``, ``load_policy`` or the Sim2Real loop.
+
+    Args:
+        task (str): one of :data:`SHIPPED_AGENTS`' keys.
+
+    Raises:
+        ValueError: no agent is planned for ``task``; the message names the tasks that have one.
+        FileNotFoundError: this installation lacks the file (a checkout from before the agent shipped).
+
+    Example:
+        >>> shipped_agent("franka_pick_place").name
+        'franka_pick_place_cebp.pt'
+        >>> shipped_agent("slide")
+        Traceback (most recent call last):
+        ...
+        ValueError: no agent ships for task 'slide'; tasks with one: ['franka_pick_place', 'pick_place', 'push']
+    """
+    if task not in SHIPPED_AGENTS:
+        raise ValueError(f"no agent ships for task {task!r}; tasks with one: {sorted(SHIPPED_AGENTS)}")
+    path = SHIPPED_AGENTS[task]
+    if not path.is_file():
+        shipped = sorted(name for name, file in SHIPPED_AGENTS.items() if file.is_file())
+        raise FileNotFoundError(
+            f"the {task} agent is not in this installation ({path} is missing); shipped here: {shipped}. "
+            f"Train one with `python train.py preset=paper env={task}` and pass its run folder instead."
+        )
+    return path
+
+
+def model_card(task: str, state: dict[str, Any]) -> str:
+    """A Markdown section describing a shipped agent, from the ``card`` its policy file carries.
+
+    Args:
+        task (str): the agent's task.
+        state (dict): its policy file's contents (``torchrl_cebp.training.checkpoint.read_policy_state``).
+
+    Example:
+        >>> card = {"sampler": "EBP", "command": "python train.py ...", "code_commit": "abc", "epochs": 20,
+        ...         "training_hours": 1.5, "success": 0.97, "episodes": 100, "seed": 7, "epoch": 19,
+        ...         "test_success": 0.96, "cpu": "2 cores"}
+        >>> print(model_card("push", {"env": {"task": "push"}, "card": card}).splitlines()[0])
+        ## push: success 0.97 over 100 fresh episodes
+    """
+    card = state["card"]
+    rows = {
+        "task": f"`{state['env']['task']}`, goal space `{state['env'].get('goal_space', 'standard')}`, "
+        f"control `{state['env'].get('control', 'mocap')}`",
+        "sampler": card["sampler"],
+        "trained with": f"`{card['command']}`",
+        "code commit": f"`{card['code_commit']}`",
+        "training": f"{card['epochs']} epochs, {card['training_hours']:.1f} h on {card['cpu']}; this file is the "
+        f"policy after epoch {card['epoch']} (test success {card['test_success']:.2f} in training)",
+        "success": f"{card['success']:.2f} over {card['episodes']} fresh episodes (seed {card['seed']}), "
+        f"`python -m torchrl_cebp.evaluate --task {task} --episodes {card['episodes']} --seed {card['seed']}`",
+        "file": f"`torchrl_cebp.agents.shipped_agent({task!r})`: the actor and observation normaliser only, loaded with "
+        "`weights_only=True`",
+    }
+    table = "\n".join(f"| {name} | {value} |" for name, value in rows.items())
+    return f"## {task}: success {card['success']:.2f} over {card['episodes']} fresh episodes\n\n| | |\n|---|---|\n{table}\n"
