@@ -63,7 +63,8 @@ plot "$results" --panels push-standard-temperature --against 'cebp_T(.+)/paper-p
   --parameter-values 0.001 0.01 0.1 1 5 \
   --against-references push-standard/her/paper push-standard/cper/paper-per_worker-her_past \
   push-standard/cebp_initial/paper-per_worker --out "$results/push_temperature.png" \
-  --title "The paper-form CEBP's sigmoid temperature on robot A's Push, with HER, CPER and the Initial commit's CEBP"
+  --title "The paper-form CEBP's sigmoid temperature on robot A's Push, with HER, CPER and the Initial commit's CEBP" \
+  --table 5 10 12 --improvement-at 10 12 --parameter-baseline 0.01
 question "The normalised critic loss (superseded), robot A"
 plot "$results" --panels "${robot_a[@]}" \
   --configurations 'her/*' 'cebp_initial/paper-per_worker' 'cebp_initial/paper-per_worker-wnorm' \

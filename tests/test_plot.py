@@ -13,6 +13,7 @@ from torchrl_cebp.plot import (
     iqm_band,
     main,
     method_label,
+    parameter_table,
     plot_against_parameter,
     select_configurations,
     summary_table,
@@ -421,3 +422,84 @@ def test_against_parameter_refuses_what_it_cannot_draw(tmp_path):
         plot_against_parameter(tmp_path, "sweep", r"cebp_T(.+)/other", [], [5], tmp_path / "a.png")
     with pytest.raises(KeyError, match="reference 'base/her/paper' has no runs"):
         plot_against_parameter(tmp_path, "sweep", r"cebp_T(.+)/other", ["base/her/paper"], [1], tmp_path / "a.png")
+
+
+def write_temperature_study(root):
+    """T = 0.01 (3 seeds), T = 5 (2 seeds, one short of epoch 3), HER (3 seeds) and CPER (1 seed, 2 epochs)."""
+    for seed, (early, late) in enumerate([(0.2, 0.6), (0.4, 0.8), (0.3, 0.7)]):
+        write_run(root / f"push-temperature/cebp_T0.01/paper-per_worker/seed{seed}", [0.0, early, late])
+        write_run(root / f"push-standard/her/paper/seed{seed}", [0.0, 0.1 * (seed + 1), 0.5 + 0.1 * seed])
+    write_run(root / "push-temperature/cebp_T5/paper-per_worker/seed0", [0.0, 0.1, 0.9])
+    write_run(root / "push-temperature/cebp_T5/paper-per_worker/seed1", [0.0, 0.3])
+    write_run(root / "push-temperature/cebp_initial/paper-per_worker/seed0", [0.0, 1.0, 1.0])  # not a temperature
+    write_run(root / "push-standard/cper/paper-per_worker-her_past/seed0", [0.0, 0.1])
+    return ["push-temperature", "--against", r"cebp_T(.+)/paper-per_worker", "--at", "3", "--against-references",
+            "push-standard/her/paper", "push-standard/cper/paper-per_worker-her_past"]
+
+
+def test_against_parameter_table_has_a_row_per_value_planned_or_run_then_per_reference(tmp_path, capsys):
+    study = write_temperature_study(tmp_path)
+    main([str(tmp_path), "--panels", *study, "--out", str(tmp_path / "against.png"), "--parameter-values", "0.001",
+          "0.01", "5", "--table", "2", "3", "--improvement-at", "3", "--parameter-baseline", "0.01"])
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
+    assert lines[0] == ("| method | run folder | seeds | IQM [95% CI] after 2 epochs | IQM [95% CI] after 3 epochs"
+                        " | P(> T = 0.01) [95% CI] after 3 epochs | P(> HER) [95% CI] after 3 epochs"
+                        " | training hours |")
+    rows = [line.split(" | ") for line in lines[1:]]
+    assert [cells[:3] for cells in rows] == [
+        ["| CEBP (paper form), T = 0.001", "-", "(not run yet)"],  # planned: seen to be missing
+        ["| CEBP (paper form), T = 0.01", "push-temperature/cebp_T0.01/paper-per_worker", "3"],
+        ["| CEBP (paper form), T = 5", "push-temperature/cebp_T5/paper-per_worker", "2"],
+        ["| HER", "push-standard/her/paper", "3"],
+        ["| CPER", "push-standard/cper/paper-per_worker-her_past", "1"],
+    ]
+    missing, t001, t5, her, cper = rows
+    assert missing[3:] == ["-"] * 4 + ["- |"]
+    # T = 0.01 after 3 epochs: 0.6, 0.8, 0.7 against HER's 0.5, 0.6, 0.7: wins 1.5 + 3 + 2.5 of 9 pairs
+    assert t001[3:5] == ["0.30 [0.20, 0.40]", "0.70 [0.60, 0.80]"]
+    assert t001[5] == "(baseline)" and t001[6].startswith("0.78 [")
+    assert t001[7] == "0.1 |"  # 9 epochs of 60 s
+    assert t5[3:7] == ["0.20 [0.10, 0.30]", "0.90 [0.90, 0.90] (1 seed)", "1.00 [1.00, 1.00]", "1.00 [1.00, 1.00]"]
+    assert her[3:5] == ["0.20 [0.10, 0.30]", "0.60 [0.50, 0.70]"]
+    assert her[5].startswith("0.22 [") and her[6] == "(baseline)"
+    assert cper[3:7] == ["0.10 [0.10, 0.10]", "-", "-", "-"]  # not yet at epoch 3
+
+
+def test_against_parameter_table_compares_with_a_planned_baseline_only_once_it_has_runs(tmp_path):
+    write_temperature_study(tmp_path)
+    table = parameter_table(tmp_path, "push-temperature", r"cebp_T(.+)/paper-per_worker", [], [3], improvement_at=[3],
+                            parameter_baseline=0.1, planned_values=[0.1])
+    rows = [line.split(" | ") for line in table.splitlines()[2:]]
+    assert [cells[:3] + cells[4:5] for cells in rows] == [
+        ["| CEBP (paper form), T = 0.01", "push-temperature/cebp_T0.01/paper-per_worker", "3", "-"],
+        ["| CEBP (paper form), T = 0.1", "-", "(not run yet)", "(baseline)"],
+        ["| CEBP (paper form), T = 5", "push-temperature/cebp_T5/paper-per_worker", "2", "-"],
+    ]
+
+
+def test_against_parameter_table_refuses_a_baseline_outside_the_study_and_options_it_cannot_honour(tmp_path, capsys):
+    study = write_temperature_study(tmp_path)
+    out = ["--out", str(tmp_path / "against.png")]
+    with pytest.raises(ValueError, match=r"parameter_baseline=0.1 is not a value of the study; its values \(with"
+                                         r" runs or planned\): \['0.001', '0.01', '5'\]"):
+        main([str(tmp_path), "--panels", *study, *out, "--parameter-values", "0.001", "--table", "3",
+              "--improvement-at", "3", "--parameter-baseline", "0.1"])
+    with pytest.raises(ValueError, match=r"improvement_at=\[3\] needs a parameter_baseline or a reference"):
+        parameter_table(tmp_path, "push-temperature", r"cebp_T(.+)/paper-per_worker", [], [3], improvement_at=[3])
+    for extra, error in (
+        (["--table", "3", "--parameter-baseline", "0.01"], "--parameter-baseline goes with --improvement-at"),
+        (["--improvement-at", "3"], "--improvement-at goes with --table"),
+        (["--table", "3", "--mean-over", "1", "3"], "--mean-over does not go with --against"),
+        (["--table", "3", "--improvement-at", "3", "--baseline", "cper"], "--baseline does not go with --against"),
+        (["--table", "3", "--tables-out", str(tmp_path / "t.md")], "--tables-out does not go with --against"),
+    ):
+        with pytest.raises(SystemExit):
+            main([str(tmp_path), "--panels", *study, *out, *extra])
+        assert error in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([str(tmp_path), "--table", "3", "--improvement-at", "3", "--parameter-baseline", "0.01"])
+    assert "--parameter-baseline goes with --against" in capsys.readouterr().err
+    write_run(tmp_path / "push-temperature/cebp_T5.0/paper-per_worker/seed0", [0.1])
+    with pytest.raises(ValueError, match="cebp_T5/paper-per_worker and cebp_T5.0/paper-per_worker both read as"
+                                         " parameter 5"):
+        parameter_table(tmp_path, "push-temperature", r"cebp_T(.+)/paper-per_worker", [], [3])

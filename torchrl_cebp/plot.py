@@ -10,6 +10,9 @@
     python -m torchrl_cebp.plot runs --configurations 'her/*' 'cper/*'   # these methods only
     python -m torchrl_cebp.plot runs --panels push-standard-temperature --against 'cebp_T(.+)/paper-per_worker' \
         --at 10 12 --against-references push-standard/her/paper   # success after 10 and 12 epochs against T
+    python -m torchrl_cebp.plot runs --panels push-standard-temperature --against 'cebp_T(.+)/paper-per_worker' \
+        --at 10 12 --against-references push-standard/her/paper --parameter-values 0.01 0.1 1 \
+        --table 10 12 --improvement-at 12 --parameter-baseline 0.01   # and a table: P(> T = 0.01), P(> HER)
 
 The statistics follow rliable's conventions (:mod:`torchrl_cebp.stats`): IQM, stratified-bootstrap
 95% confidence intervals, and the probability of improvement over a baseline configuration.
@@ -701,6 +704,69 @@ PARAMETER_DODGE = 0.03  # decades between the epoch counts' points at one parame
 REFERENCE_LINESTYLES = ("--", ":", "-.")
 
 
+def parameter_runs(
+    root: str | Path, panel: str, parameter_pattern: str, references: Sequence[str], metric: str = "test_success"
+) -> tuple[dict[float, tuple[str, list[np.ndarray]]], dict[str, list[np.ndarray]]]:
+    """The runs of a parameter study: ``({value: (configuration label, curves)}, {reference: curves})``, the values
+    ascending and the references in the order given.
+
+    Args:
+        root (str or Path): the sweep folder (see :func:`collect_sweep`).
+        panel (str): the task folder of the parameter's runs.
+        parameter_pattern (str): a regular expression that matches, in full, the configuration labels of ``panel``
+            that belong to the study; its first group is the parameter value.
+        references (sequence of str): ``"<panel>/<sampler>/<variant>"`` of each reference configuration.
+        metric (str, optional): the CSV column read. Defaults to ``"test_success"``.
+
+    Raises:
+        ValueError: a parameter value that is not a positive number (a log axis needs one), one value read from two
+            configurations, or a pattern without a group.
+        KeyError: ``panel`` or a reference has no runs, or ``parameter_pattern`` matches no configuration.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     for label in ("sweep/cebp_T5/paper", "sweep/cebp_T0.1/paper", "base/her/paper"):
+        ...         run = Path(d) / label / "seed0"
+        ...         run.mkdir(parents=True)
+        ...         _ = (run / CSV_NAME).write_text("epoch,test_success\\n0,0.5\\n")
+        ...     by_value, references = parameter_runs(d, "sweep", r"cebp_T(.+)/paper", ["base/her/paper"])
+        >>> {value: label for value, (label, _) in by_value.items()}, list(references)
+        ({0.1: 'cebp_T0.1/paper', 5.0: 'cebp_T5/paper'}, ['base/her/paper'])
+    """
+    groups = collect_sweep(Path(root), metric)
+    if panel not in groups:
+        raise KeyError(f"no runs for panel {panel!r} under {root}; its panels: {sorted(groups)}")
+    pattern = re.compile(parameter_pattern)
+    if pattern.groups < 1:
+        raise ValueError(f"parameter_pattern={parameter_pattern!r} has no group to read the parameter value from")
+    by_value: dict[float, tuple[str, list[np.ndarray]]] = {}
+    for label, curves in groups[panel].items():
+        match = pattern.fullmatch(label)
+        if match is None:
+            continue
+        try:
+            value = float(match.group(1))
+        except ValueError:
+            value = float("nan")
+        if not value > 0:
+            raise ValueError(f"{label}: parameter {match.group(1)!r} is not a positive number, which a log axis needs")
+        if value in by_value:
+            raise ValueError(f"{by_value[value][0]} and {label} both read as parameter {value:g}; narrow the"
+                             " pattern or move one of them")
+        by_value[value] = (label, curves)
+    if not by_value:
+        raise KeyError(f"{parameter_pattern!r} matches no configuration of {panel}: {sorted(groups[panel])}")
+    reference_curves = {}
+    for reference in references:
+        reference_panel, _, label = reference.partition("/")
+        if label not in groups.get(reference_panel, {}):
+            known = sorted(f"{p}/{known_label}" for p, labels in groups.items() for known_label in labels)
+            raise KeyError(f"reference {reference!r} has no runs under {root}; the configurations: {known}")
+        reference_curves[reference] = groups[reference_panel][label]
+    return dict(sorted(by_value.items())), reference_curves
+
+
 def plot_against_parameter(
     root: str | Path,
     panel: str,
@@ -768,37 +834,10 @@ def plot_against_parameter(
     """
     if any(n < 1 for n in epochs):
         raise ValueError(f"epochs={list(epochs)}: epoch counts start at 1")
-    groups = collect_sweep(Path(root), metric)
-    if panel not in groups:
-        raise KeyError(f"no runs for panel {panel!r} under {root}; its panels: {sorted(groups)}")
-    pattern = re.compile(parameter_pattern)
-    if pattern.groups < 1:
-        raise ValueError(f"parameter_pattern={parameter_pattern!r} has no group to read the parameter value from")
-    by_value: dict[float, list[np.ndarray]] = {}
-    for label, curves in groups[panel].items():
-        match = pattern.fullmatch(label)
-        if match is None:
-            continue
-        try:
-            value = float(match.group(1))
-        except ValueError:
-            value = float("nan")
-        if not value > 0:
-            raise ValueError(f"{label}: parameter {match.group(1)!r} is not a positive number, which a log axis needs")
-        by_value[value] = curves
-    if not by_value:
-        raise KeyError(f"{parameter_pattern!r} matches no configuration of {panel}: {sorted(groups[panel])}")
-    reference_curves = {}
-    for reference in references:
-        reference_panel, _, label = reference.partition("/")
-        if label not in groups.get(reference_panel, {}):
-            known = sorted(f"{p}/{known_label}" for p, labels in groups.items() for known_label in labels)
-            raise KeyError(f"reference {reference!r} has no runs under {root}; the configurations: {known}")
-        reference_curves[reference] = groups[reference_panel][label]
-
+    by_value, reference_curves = parameter_runs(root, panel, parameter_pattern, references, metric)
     drawn: dict[int, dict[str, dict]] = {}
     for n in epochs:
-        parameter = {value: seeds_summary(values) for value, curves in sorted(by_value.items())
+        parameter = {value: seeds_summary(values) for value, (_, curves) in by_value.items()
                      if (values := values_at_epoch(curves, n))}
         reference_levels = {reference: seeds_summary(values) for reference, curves in reference_curves.items()
                             if (values := values_at_epoch(curves, n))}
@@ -903,6 +942,57 @@ def epochs_phrase(n: int) -> str:
     return f"after {n} epoch{'s' * (n > 1)}"
 
 
+def improvement_cells(curves: list[np.ndarray], baseline: list[np.ndarray] | None, at: Sequence[int]) -> list[str]:
+    """:func:`improvement_cell` after each of ``at`` epochs: ``(baseline)`` in the baseline's own row (``curves`` is
+    ``baseline``), ``-`` without a baseline (``None``).
+
+    Args:
+        curves (list of np.ndarray): one curve per seed of the row's configuration.
+        baseline (list of np.ndarray or None): one curve per seed of the baseline configuration.
+        at (sequence of int): the epoch counts (from 1) of the columns.
+
+    Examples:
+        >>> her = [np.array([0.1, 0.2])]
+        >>> improvement_cells([np.array([0.3, 0.1])], her, [1, 2]), improvement_cells(her, her, [1, 2])
+        (['1.00 [1.00, 1.00]', '0.00 [0.00, 0.00]'], ['(baseline)', '(baseline)'])
+    """
+    if curves is baseline:
+        return ["(baseline)"] * len(at)
+    return [improvement_cell(values_at_epoch(curves, n), values_at_epoch(baseline or [], n)) for n in at]
+
+
+def hours_cell(epoch_seconds: list[np.ndarray]) -> str:
+    """The training hours of a configuration's runs, the sum of their ``epoch_s``; ``-`` when none logs it.
+
+    Args:
+        epoch_seconds (list of np.ndarray): each seed's ``epoch_s`` curve.
+
+    Examples:
+        >>> hours_cell([np.array([1800.0, 1800.0]), np.array([3600.0])]), hours_cell([])
+        ('2.0', '-')
+    """
+    if not epoch_seconds:
+        return "-"
+    return f"{sum(curve.sum() for curve in epoch_seconds) / 3600:.1f}"
+
+
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A Markdown table of ``rows`` under ``header``.
+
+    Args:
+        header (sequence of str): the column heads.
+        rows (sequence of sequence of str): the rows' cells.
+
+    Examples:
+        >>> print(markdown_table(["method", "seeds"], [["HER", "3"]]))
+        | method | seeds |
+        |---|---|
+        | HER | 3 |
+    """
+    return "\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
+                      *("| " + " | ".join(cells) + " |" for cells in rows)])
+
+
 def summary_table(
     root: str | Path,
     after_epochs: list[int],
@@ -970,8 +1060,7 @@ def summary_table(
         header.append(f"IQM [95% CI] of each seed's mean over epochs {mean_over[0]}-{mean_over[1]}")
     header.extend(f"P(> {sampler_name(baseline)}) [95% CI] {epochs_phrase(n)}" for n in improvement_at)
     header.append("training hours")
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-
+    rows = []
     for panel, curves_by_label in values.items():
         baselines = [curves for label, curves in curves_by_label.items() if sampler_of(label) == baseline]
         for label, curves in sorted(curves_by_label.items(), key=lambda item: method_order(item[0])):
@@ -982,16 +1071,10 @@ def summary_table(
                 first, last = mean_over
                 window = [curve[first - 1 : last].mean() for curve in curves if len(curve) >= last]
                 cells.append(iqm_cell(window, len(curves)))
-            if len(baselines) == 1 and curves is baselines[0]:
-                cells.extend("(baseline)" for _ in improvement_at)
-            else:
-                for n in improvement_at:
-                    reference = values_at_epoch(baselines[0], n) if len(baselines) == 1 else []
-                    cells.append(improvement_cell(values_at_epoch(curves, n), reference))
-            hours = sum(curve.sum() for curve in epoch_seconds[panel][label]) / 3600
-            cells.append(f"{hours:.1f}")
-            lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+            cells += improvement_cells(curves, baselines[0] if len(baselines) == 1 else None, improvement_at)
+            cells.append(hours_cell(epoch_seconds[panel][label]))
+            rows.append(cells)
+    return markdown_table(header, rows)
 
 
 def panel_tables(
@@ -1055,8 +1138,123 @@ def panel_tables(
     return "\n\n".join(sections)
 
 
+def parameter_table(
+    root: str | Path,
+    panel: str,
+    parameter_pattern: str,
+    references: Sequence[str],
+    after_epochs: Sequence[int],
+    metric: str = "test_success",
+    improvement_at: Sequence[int] = (),
+    parameter_baseline: float | None = None,
+    parameter_name: str = "sigmoid temperature T",
+    planned_values: Sequence[float] = (),
+) -> str:
+    """A Markdown table of a parameter study (the runs :func:`plot_against_parameter` draws): one row per parameter
+    value, ascending, then one per reference configuration, in the order given. Each row gives the method
+    (:func:`method_label`), the run folder ``<panel>/<sampler>/<variant>``, the seeds, the IQM [95% CI] of
+    ``metric`` after each of ``after_epochs`` epochs, the probability of improvement over ``parameter_baseline``'s
+    runs and over the first reference's after each of ``improvement_at`` epochs (as :func:`summary_table`'s), and
+    the training hours. A planned value without runs yet has a row of ``-``, its seeds ``(not run yet)``.
+
+    Args:
+        root (str or Path): the sweep folder (see :func:`collect_sweep`).
+        panel (str): the task folder of the parameter's runs.
+        parameter_pattern (str): as :func:`plot_against_parameter`'s.
+        references (sequence of str): ``"<panel>/<sampler>/<variant>"`` of each reference configuration.
+        after_epochs (sequence of int): the epoch counts (from 1) to give an IQM column each.
+        metric (str, optional): the CSV column summarised. Defaults to ``"test_success"``.
+        improvement_at (sequence of int, optional): the epoch counts of the probability-of-improvement columns.
+            Defaults to none.
+        parameter_baseline (float, optional): the parameter value whose runs the first probability columns compare
+            with. Defaults to ``None`` (no such columns).
+        parameter_name (str, optional): the parameter's name; its last word names ``parameter_baseline`` in the
+            column heads (``P(> T = 0.01)``). Defaults to ``"sigmoid temperature T"``.
+        planned_values (sequence of float, optional): the values the study runs, each given a row. Defaults to none
+            (the values with runs).
+
+    Raises:
+        ValueError: an epoch count below 1, a ``parameter_baseline`` that is neither a value with runs nor a planned
+            one, ``parameter_baseline`` without ``improvement_at``, or ``improvement_at`` with nothing to compare
+            with; and as :func:`parameter_runs`.
+        KeyError: as :func:`parameter_runs`.
+
+    Examples:
+        >>> import tempfile
+        >>> with tempfile.TemporaryDirectory() as d:
+        ...     for label, values in (("push-temperature/cebp_T0.01/paper-per_worker", (0.2, 0.6)),
+        ...                           ("push-temperature/cebp_T5/paper-per_worker", (0.1, 0.4)),
+        ...                           ("push-standard/her/paper", (0.2, 0.5))):
+        ...         run = Path(d) / label / "seed0"
+        ...         run.mkdir(parents=True)
+        ...         rows = [f"{e},{v},1800" for e, v in enumerate(values)]
+        ...         _ = (run / CSV_NAME).write_text("\\n".join(["epoch,test_success,epoch_s", *rows]) + "\\n")
+        ...     table = parameter_table(d, "push-temperature", r"cebp_T(.+)/paper-per_worker",
+        ...                             ["push-standard/her/paper"], [2], improvement_at=[2], parameter_baseline=0.01,
+        ...                             planned_values=[0.01, 1, 5])
+        >>> print(table)
+        | method | run folder | seeds | IQM [95% CI] after 2 epochs | P(> T = 0.01) [95% CI] after 2 epochs | P(> HER) [95% CI] after 2 epochs | training hours |
+        |---|---|---|---|---|---|---|
+        | CEBP (paper form), T = 0.01 | push-temperature/cebp_T0.01/paper-per_worker | 1 | 0.60 [0.60, 0.60] | (baseline) | 1.00 [1.00, 1.00] | 1.0 |
+        | CEBP (paper form), T = 1 | - | (not run yet) | - | - | - | - |
+        | CEBP (paper form), T = 5 | push-temperature/cebp_T5/paper-per_worker | 1 | 0.40 [0.40, 0.40] | 0.00 [0.00, 0.00] | 0.00 [0.00, 0.00] | 1.0 |
+        | HER | push-standard/her/paper | 1 | 0.50 [0.50, 0.50] | 0.00 [0.00, 0.00] | (baseline) | 1.0 |
+    """
+    if any(n < 1 for n in [*after_epochs, *improvement_at]):
+        raise ValueError(f"after_epochs={list(after_epochs)}, improvement_at={list(improvement_at)}: epoch counts"
+                         " start at 1")
+    by_value, reference_curves = parameter_runs(root, panel, parameter_pattern, references, metric)
+    values = sorted({*by_value, *planned_values})
+    if parameter_baseline is not None and parameter_baseline not in values:
+        raise ValueError(f"parameter_baseline={parameter_baseline:g} is not a value of the study; its values (with"
+                         f" runs or planned): {[f'{value:g}' for value in values]}")
+    if parameter_baseline is not None and not improvement_at:
+        raise ValueError(f"parameter_baseline={parameter_baseline:g} needs improvement_at: the epochs at which the"
+                         " runs are compared with it")
+    if improvement_at and parameter_baseline is None and not references:
+        raise ValueError(f"improvement_at={list(improvement_at)} needs a parameter_baseline or a reference to compare"
+                         " with")
+    symbol = parameter_name.split()[-1]
+    # A planned value's method is named as its runs' folder will be: a run's label with the value in the group.
+    some_label = next(iter(by_value.values()))[0]
+    group = re.compile(parameter_pattern).fullmatch(some_label).span(1)
+    epoch_seconds = collect_sweep(Path(root), "epoch_s")
+    # Per row: (method, run folder or None without runs, one curve per seed, the curves of epoch_s).
+    row_of: dict[float | str, tuple[str, str | None, list[np.ndarray], list[np.ndarray]]] = {}
+    for value in values:
+        if value in by_value:
+            label, curves = by_value[value]
+            row_of[value] = (method_label(label), f"{panel}/{label}", curves, epoch_seconds[panel][label])
+        else:
+            planned = f"{some_label[:group[0]]}{value:g}{some_label[group[1]:]}"
+            row_of[value] = (method_label(planned), None, [], [])
+    for reference, curves in reference_curves.items():
+        reference_panel, _, label = reference.partition("/")
+        row_of[reference] = (method_label(label), reference, curves, epoch_seconds[reference_panel][label])
+    baselines = {}  # the name each column head gives it: its curves
+    if parameter_baseline is not None:
+        baselines[f"{symbol} = {parameter_baseline:g}"] = row_of[parameter_baseline][2]
+    if references:
+        baselines[method_label(references[0].partition("/")[2])] = reference_curves[references[0]]
+
+    header = ["method", "run folder", "seeds", *(f"IQM [95% CI] {epochs_phrase(n)}" for n in after_epochs)]
+    header += [f"P(> {name}) [95% CI] {epochs_phrase(n)}" for name in baselines for n in improvement_at]
+    header.append("training hours")
+    rows = []
+    for method, folder, curves, seconds in row_of.values():
+        cells = [method, folder or "-", str(len(curves)) if folder else "(not run yet)"]
+        cells += [iqm_cell(values_at_epoch(curves, n), len(curves)) for n in after_epochs]
+        for baseline in baselines.values():
+            cells += improvement_cells(curves, baseline, improvement_at)
+        cells.append(hours_cell(seconds))
+        rows.append(cells)
+    return markdown_table(header, rows)
+
+
 def main(argv: list[str] | None = None) -> None:
-    """The command line: draws the sweep (:func:`plot_sweep`) and, with ``--table``, prints its tables.
+    """The command line: draws the sweep (:func:`plot_sweep`) and, with ``--table``, prints its tables; with
+    ``--against``, draws a parameter study (:func:`plot_against_parameter`) and, with ``--table``, prints its table
+    (:func:`parameter_table`).
 
     Args:
         argv (list of str, optional): the arguments (``--help`` lists them). Defaults to ``None``: the
@@ -1094,7 +1292,9 @@ def main(argv: list[str] | None = None) -> None:
         "--reference-panel", metavar="TASK_FOLDER", help="with --reference: mark every panel with this panel's values"
     )
     parser.add_argument(
-        "--table", nargs="+", type=int, metavar="N", help="also print a Markdown table of the metric after N epochs"
+        "--table", nargs="+", type=int, metavar="N",
+        help="also print a Markdown table of the metric after N epochs (with --against: a row per parameter value,"
+             " planned ones included, then per reference)",
     )
     parser.add_argument(
         "--mean-over", nargs=2, type=int, metavar=("FIRST", "LAST"),
@@ -1102,9 +1302,12 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument(
         "--improvement-at", nargs="+", type=int, default=[], metavar="N",
-        help="with --table: a column of the probability of improvement over --baseline after each N epochs",
+        help="with --table: a column of the probability of improvement over --baseline after each N epochs (with"
+             " --against: over --parameter-baseline, then over the first --against-references)",
     )
-    parser.add_argument("--baseline", default="her", help="the configuration --improvement-at compares with")
+    parser.add_argument(
+        "--baseline", help="the sampler folder --improvement-at compares with (default: her; not with --against)"
+    )
     parser.add_argument(
         "--tables-out", metavar="MD",
         help="with --table: also write one table per task to this Markdown file, each with the epochs its runs reached",
@@ -1117,29 +1320,56 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--at", nargs="+", type=int, default=[], metavar="N", help="with --against: the epoch counts")
     parser.add_argument(
         "--against-references", nargs="+", default=[], metavar="PANEL/SAMPLER/VARIANT",
-        help="with --against: configurations drawn as horizontal reference lines",
+        help="with --against: configurations drawn as horizontal reference lines, and the table's last rows (the first"
+             " is the second baseline of --improvement-at)",
     )
-    parser.add_argument("--parameter-name", default="sigmoid temperature T", help="with --against: the x axis's name")
+    parser.add_argument(
+        "--parameter-name", default="sigmoid temperature T",
+        help="with --against: the x axis's name; its last word names --parameter-baseline in the table",
+    )
     parser.add_argument(
         "--parameter-values", nargs="+", type=float, default=[], metavar="VALUE",
-        help="with --against: the values the study runs, ticked on the x axis whether they have runs yet or not",
+        help="with --against: the values the study runs, ticked on the x axis and given a table row whether they"
+             " have runs yet or not",
+    )
+    parser.add_argument(
+        "--parameter-baseline", type=float, metavar="VALUE",
+        help="with --against and --improvement-at: the parameter value whose runs the first probability columns"
+             " compare with",
     )
     args = parser.parse_args(argv)
+    for option, value in (
+        ("--mean-over", args.mean_over), ("--improvement-at", args.improvement_at), ("--tables-out", args.tables_out)
+    ):
+        if value and not args.table:
+            parser.error(f"{option} goes with --table: give --table too")
+    if args.parameter_baseline is not None and not args.improvement_at:
+        parser.error("--parameter-baseline goes with --improvement-at: give --improvement-at too")
     if args.against:
         if not args.at or args.panels is None or len(args.panels) != 1:
             parser.error("--against needs --at and exactly one --panels folder")
-        for option, value in (
-            ("--table", args.table), ("--reference", args.reference), ("--configurations", args.configurations),
-            ("--log-y", args.log_y),
+        for option, value, why in (
+            ("--reference", args.reference, "the pattern picks the configurations drawn"),
+            ("--reference-panel", args.reference_panel, "the pattern picks the configurations drawn"),
+            ("--configurations", args.configurations, "the pattern picks the configurations drawn"),
+            ("--log-y", args.log_y, "the pattern picks the configurations drawn"),
+            ("--baseline", args.baseline, "give --parameter-baseline, and the first --against-references"),
+            ("--mean-over", args.mean_over, "its table has the --table and --improvement-at columns"),
+            ("--tables-out", args.tables_out, "its one table is printed"),
         ):
             if value:
-                parser.error(f"{option} does not go with --against: the pattern picks the configurations drawn")
+                parser.error(f"{option} does not go with --against: {why}")
         out = args.out or Path(args.root) / f"{args.metric}_against_parameter.png"
         drawn = plot_against_parameter(args.root, args.panels[0], args.against, args.against_references, args.at,
                                        out, args.metric, args.parameter_name, title=args.title,
                                        planned_values=args.parameter_values)
         print(f"wrote {out}")
-        for n, summary in drawn.items():
+        if args.table:
+            print(parameter_table(args.root, args.panels[0], args.against, args.against_references, args.table,
+                                  args.metric, args.improvement_at, args.parameter_baseline, args.parameter_name,
+                                  args.parameter_values))
+            return
+        for n, summary in drawn.items():  # the drawn points, where no table gives them
             for value, (level, low, high, seeds) in summary["parameter"].items():
                 print(f"{epochs_phrase(n)}: {args.parameter_name} = {value:g}: {level:.2f} [{low:.2f}, {high:.2f}]"
                       f" ({seed_count(seeds)})")
@@ -1148,15 +1378,10 @@ def main(argv: list[str] | None = None) -> None:
         return
     for option, value in (
         ("--at", args.at), ("--against-references", args.against_references),
-        ("--parameter-values", args.parameter_values),
+        ("--parameter-values", args.parameter_values), ("--parameter-baseline", args.parameter_baseline is not None),
     ):
         if value:
             parser.error(f"{option} goes with --against: give --against too")
-    for option, value in (
-        ("--mean-over", args.mean_over), ("--improvement-at", args.improvement_at), ("--tables-out", args.tables_out)
-    ):
-        if value and not args.table:
-            parser.error(f"{option} goes with --table: give --table too")
     if args.reference_panel and not args.reference:
         parser.error("--reference-panel goes with --reference: give --reference too")
     out = plot_sweep(args.root, args.out, args.metric, args.title, args.log_y, args.panels, args.reference,
@@ -1166,11 +1391,12 @@ def main(argv: list[str] | None = None) -> None:
         # The figure has refused any panel without runs that the reference does not name; those left have no rows.
         with_runs = select_configurations(collect_sweep(Path(args.root), args.metric), args.configurations)
         panels = None if args.panels is None else [panel for panel in args.panels if panel in with_runs]
-        print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline,
+        baseline = args.baseline or "her"
+        print(summary_table(args.root, args.table, args.metric, args.mean_over, args.improvement_at, baseline,
                             panels, args.configurations))
         if args.tables_out:
             tables = panel_tables(
-                args.root, args.table, args.metric, args.mean_over, args.improvement_at, args.baseline, panels,
+                args.root, args.table, args.metric, args.mean_over, args.improvement_at, baseline, panels,
                 args.configurations,
             )
             Path(args.tables_out).write_text(tables + "\n")
