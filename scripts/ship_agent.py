@@ -7,8 +7,8 @@ The policy file (a run's ``best_policy.pt`` or ``policy.pt``) is scored over ``-
 (``torchrl_cebp.agents.SHIPPED_AGENTS``) with a model card: the sampler, the training command, the code commit and
 training time of its run (from the run's ``progress.csv``), and the score. The card's command is the run's ``train.py``
 overrides (its ``.hydra/overrides.yaml``, or ``--overrides``), checked against the run's checkpoint: it rebuilds the run.
-Then it writes ``docs/img/agent_<task>.mp4`` (two episodes), ``docs/img/agent_<task>_frames.png`` (one episode, six
-frames) and the cards of every shipped agent into ``docs/agents.md``.
+Then it writes ``docs/img/agent_<task>.mp4`` (two episodes), ``docs/img/agent_<task>_frames.png`` (six frames of
+the first half of one episode) and the cards of every shipped agent into ``docs/agents.md``.
 
     .venv/bin/python scripts/ship_agent.py push runs/push-standard/ebp/paper-per_worker/seed0/best_policy.pt
 """
@@ -114,14 +114,46 @@ def ship(task: str, state: dict, force: bool) -> None:
     save_policy(state, path)
     print(f"[ship] wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
     frames = render_episodes(path, episodes=2, seed=FRESH_SEED)
-    print(f"[ship] wrote {write_video(frames, REPO / 'docs' / 'img' / f'agent_{task}.mp4')}")
-    print(f"[ship] wrote {write_frame_strip(frames[: len(frames) // 2], REPO / 'docs' / 'img' / f'agent_{task}_frames.png')}")
+    video, strip = (REPO / "docs" / name for name in media(task))
+    print(f"[ship] wrote {write_video(frames, video)}")
+    first_half = frames[: len(frames) // 4 + 1]  # of the first episode: the object moves early, then rests at the goal
+    print(f"[ship] wrote {write_frame_strip(first_half, strip)}")
     write_cards(AGENTS_PAGE)
     print(f"[ship] wrote the model cards into {AGENTS_PAGE}")
 
 
+def media(task: str) -> tuple[str, str]:
+    """The agent's video and frame strip, relative to ``docs/``."""
+    return f"img/agent_{task}.mp4", f"img/agent_{task}_frames.png"
+
+
+def model_card(task: str, state: dict) -> str:
+    """A Markdown section on a shipped agent, from the ``card`` its policy file carries, with its frame strip."""
+    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS
+
+    card = state["card"]
+    rows = {
+        "task": f"`{task}`, goal space `{state['env']['goal_space']}`, control `{state['env']['control']}`",
+        "sampler": card["sampler"],
+        "trained with": f"`{card['command']}`",
+        "code commit": f"`{card['code_commit']}`",
+        "training": f"{card['epochs']} epochs, {card['training_hours']:.1f} h on {card['cpu']}; this file is the "
+        f"policy after {card['epoch'] + 1} of them (test success {card['test_success']:.2f} in training)",
+        "success": f"{card['success']:.2f} over {card['episodes']} fresh episodes: "
+        f"`python -m torchrl_cebp.evaluate --task {task} --episodes {card['episodes']} --seed {card['seed']}`",
+        "file": f"`torchrl_cebp.agents.shipped_agent({task!r})`: the actor and observation normaliser, "
+        f"{SHIPPED_AGENTS[task].stat().st_size / 1e3:.0f} KB, loaded with `weights_only=True`",
+    }
+    video, strip = media(task)
+    table = "\n".join(f"| {name} | {value} |" for name, value in rows.items())
+    return (
+        f"## {task}: success {card['success']:.2f} over {card['episodes']} fresh episodes\n\n| | |\n|---|---|\n{table}\n\n"
+        f"![The {task} agent: six frames of the first half of an episode]({strip})\n\n[Two episodes (MP4)]({video})\n"
+    )
+
+
 def write_frame_strip(frames: list[np.ndarray], path: Path) -> Path:
-    """:data:`STRIP_FRAMES` frames of one episode, evenly spaced from its first to its last, side by side, half size."""
+    """:data:`STRIP_FRAMES` of ``frames``, evenly spaced from the first to the last, side by side, at half size."""
     import imageio.v3 as iio
 
     picks = np.linspace(0, len(frames) - 1, STRIP_FRAMES).round().astype(int)
@@ -133,7 +165,7 @@ def write_cards(page: Path) -> None:
     """Replaces the text between the page's card markers with the cards of every shipped Fetch agent."""
     import torch
 
-    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS, model_card
+    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS
 
     cards = [
         model_card(task, torch.load(path, map_location="cpu", weights_only=True))

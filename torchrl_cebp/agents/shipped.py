@@ -1,11 +1,10 @@
-"""The trained agents that ship inside the package, one per task, and the model card each file carries."""
+"""The trained agents that ship inside the package, one per task."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
-__all__ = ["SHIPPED_AGENTS", "SHIPPING_BAR", "model_card", "shipped_agent"]
+__all__ = ["SHIPPED_AGENTS", "SHIPPING_BAR", "shipped_agent"]
 
 _PACKAGE = Path(__file__).parents[1]
 
@@ -50,34 +49,3 @@ def shipped_agent(task: str) -> Path:
         )
     return path
 
-
-def model_card(task: str, state: dict[str, Any]) -> str:
-    """A Markdown section describing a shipped agent, from the ``card`` its policy file carries.
-
-    Args:
-        task (str): the agent's task.
-        state (dict): its policy file's contents (``torchrl_cebp.training.checkpoint.read_policy_state``).
-
-    Example:
-        >>> card = {"sampler": "EBP", "command": "python train.py ...", "code_commit": "abc", "epochs": 20,
-        ...         "training_hours": 1.5, "success": 0.97, "episodes": 100, "seed": 7, "epoch": 19,
-        ...         "test_success": 0.96, "cpu": "2 cores"}
-        >>> print(model_card("push", {"env": {"task": "push"}, "card": card}).splitlines()[0])
-        ## push: success 0.97 over 100 fresh episodes
-    """
-    card = state["card"]
-    rows = {
-        "task": f"`{state['env']['task']}`, goal space `{state['env'].get('goal_space', 'standard')}`, "
-        f"control `{state['env'].get('control', 'mocap')}`",
-        "sampler": card["sampler"],
-        "trained with": f"`{card['command']}`",
-        "code commit": f"`{card['code_commit']}`",
-        "training": f"{card['epochs']} epochs, {card['training_hours']:.1f} h on {card['cpu']}; this file is the "
-        f"policy after epoch {card['epoch']} (test success {card['test_success']:.2f} in training)",
-        "success": f"{card['success']:.2f} over {card['episodes']} fresh episodes (seed {card['seed']}), "
-        f"`python -m torchrl_cebp.evaluate --task {task} --episodes {card['episodes']} --seed {card['seed']}`",
-        "file": f"`torchrl_cebp.agents.shipped_agent({task!r})`: the actor and observation normaliser only, loaded with "
-        "`weights_only=True`",
-    }
-    table = "\n".join(f"| {name} | {value} |" for name, value in rows.items())
-    return f"## {task}: success {card['success']:.2f} over {card['episodes']} fresh episodes\n\n| | |\n|---|---|\n{table}\n"

@@ -288,6 +288,10 @@ class TouchFetchSlideEnv(_TouchFetchMixin, MujocoFetchSlideEnv):
     task = "slide"
 
 
+# What render() frames: the table top, near enough to see the object and the goal (the red sphere). gymnasium-robotics'
+# own camera frames the whole robot from 2.5 m, where a 5 cm block is a few pixels.
+RENDER_CAMERA = {"distance": 1.0, "azimuth": 150.0, "elevation": -30.0, "lookat": np.array([1.3, 0.75, 0.45])}
+
 TOUCH_FETCH_CLASSES: dict[str, type[_TouchFetchMixin]] = {
     cls.task: cls for cls in (TouchFetchPickAndPlaceEnv, TouchFetchPushEnv, TouchFetchSlideEnv)
 }
@@ -302,7 +306,7 @@ def make_touch_fetch(task: str, goal_space: str = "standard", **kwargs: Any) -> 
         **kwargs: ``control`` (``"mocap"`` or ``"joint"``, default ``"mocap"``), ``touch_ignores_table``
             and ``touch_in_observation`` (default ``False``; see :class:`~torchrl_cebp.envs.RobotOptions`),
             ``max_episode_steps`` (default: the goal space's), and gymnasium-robotics' own
-            (``render_mode``, ``width``, ``height``, ...).
+            (``render_mode``, ``width``, ``height``, ``default_camera_config`` (default :data:`RENDER_CAMERA`), ...).
 
     Raises:
         ValueError: an unknown task, goal space or control.
@@ -316,7 +320,7 @@ def make_touch_fetch(task: str, goal_space: str = "standard", **kwargs: Any) -> 
         ((8,), (27,))
     """
     get_goal_space(task, goal_space)  # validates both names before any model is built
-    return TOUCH_FETCH_CLASSES[task](goal_space=goal_space, **kwargs)
+    return TOUCH_FETCH_CLASSES[task](goal_space=goal_space, **{"default_camera_config": RENDER_CAMERA, **kwargs})
 
 
 def gym_id(task: str, goal_space: str = "standard", control: str = "mocap") -> str:
