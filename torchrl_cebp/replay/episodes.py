@@ -46,7 +46,8 @@ def episode_lengths(
 
 def lengths_of_ends(ends: torch.Tensor) -> torch.Tensor:
     """Valid steps of each row of ``[n, T]`` end flags (:func:`end_flags`): up to its first flag, else ``T``."""
-    return torch.where(ends.any(1), ends.to(torch.uint8).argmax(1) + 1, ends.shape[1])
+    flagged, first = ends.max(1)  # one pass: whether a row has a flag, and where its first one is
+    return torch.where(flagged, first + 1, ends.shape[1])
 
 
 def end_flags(
@@ -58,7 +59,7 @@ def end_flags(
         return None
     if rows is not None:
         ends = ends.index_select(0, rows)
-    return ends.reshape(*ends.shape[:2], -1).any(-1)
+    return ends.any(-1) if ends.ndim == 3 else ends.reshape(*ends.shape[:2], -1).any(-1)
 
 
 def stored_lengths(storage: Storage, rows: torch.Tensor, end_key: NestedKey = ("next", "done")) -> torch.Tensor:

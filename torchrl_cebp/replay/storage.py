@@ -116,7 +116,7 @@ class _EpisodeRows:
         if known:
             rows = cursor.reshape(-1) if isinstance(cursor, torch.Tensor) else (
                 torch.arange(self.max_size // self._steps)[cursor].reshape(-1))
-            self._write_counts[-1] += 1  # odd while the rows change
+            self._write_counts[-1].add_(1)  # odd while the rows change (add_: no copy back, as += makes)
         try:
             self._store(cursor, data, set_cursor, exact=exact)
             if known:
@@ -124,7 +124,7 @@ class _EpisodeRows:
         finally:
             if known:
                 self._write_counts[rows] += 1  # a row written twice in one write counts once: still a change
-                self._write_counts[-1] += 1
+                self._write_counts[-1].add_(1)
         if not known:  # the first write: every filled row from its flags, each counted written
             self._read_lengths_if_unknown()
             self._count_written(slice(0, self.shape[0]))
@@ -145,7 +145,7 @@ class _EpisodeRows:
         exact = self.initialized and self._check_keys(data)
         ends = end_flags(data, self.end_key)
         counts = None if ends is None else ends.sum(-1)
-        if counts is not None and bool((counts > 1).any()):
+        if counts is not None and counts.numel() and int(counts.max()) > 1:
             crowded = int(counts.argmax())
             raise ValueError(
                 f"row {crowded} of the batch of shape {list(data.shape)} holds {int(counts[crowded])} episode "
@@ -246,7 +246,7 @@ class _Layout(NamedTuple):
 
     source: TensorDictBase
     blocks: list[tuple[torch.Tensor, list[int]]]  # per dtype: ``[rows * T, width]`` and its entries' widths
-    row_blocks: list[tuple[torch.Tensor, list[tuple[str, ...]]]]  # per dtype: ``[rows, T, width]`` and its keys
+    row_blocks: list[tuple[torch.Tensor, list[NestedKey]]]  # per dtype: ``[rows, T, width]``, its keys as items() has
     plan: list[tuple]  # how the gathered columns nest (_read_plan)
     n_nodes: int
     row_length: int  # TorchRL's storage.shape recomputes the filled rows on every read (~10% of a draw of 256)
@@ -317,9 +317,10 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
                 self._layout()
             return
         self._layout()
-        rows = []
+        # One pass over the entries costs a third of a get each; no reshape of entries already [n, T, width].
+        rows, shape, entries = [], (*data.shape, -1), dict(data.items(True, True))
         for block, keys in self._laid_out.row_blocks:
-            parts = [data.get(key).reshape(*data.shape, -1) for key in keys]
+            parts = [value if value.ndim == 3 else value.reshape(shape) for value in map(entries.__getitem__, keys)]
             rows.append((block, parts[0] if len(parts) == 1 else torch.cat(parts, dim=-1)))
         _upstream.record_write(self, cursor, data, set_cursor)
         for block, values in rows:
@@ -359,7 +360,8 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             self._laid_out = _Layout(
                 packed, [(block.flatten(0, 1), [f.stop - f.start for f in fields if f.dtype == dtype])
                          for dtype, block in blocks.items()],
-                [(block, [f.path for f in fields if f.dtype == dtype]) for dtype, block in blocks.items()],
+                [(block, [f.path[0] if len(f.path) == 1 else f.path for f in fields if f.dtype == dtype])
+                 for dtype, block in blocks.items()],
                 *_read_plan(fields), steps)
         return self._laid_out
 
@@ -367,17 +369,18 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         if self.initialized and _is_pair_index(index):
             _, blocks, _, plan, n_nodes, row_length = self._layout()
             flat = torch.add(index[1], index[0], alpha=row_length)
-            # One gather per dtype block; split() cuts out all of its entries in one call (a slice each costs twice).
-            columns = [c for block, widths in blocks for c in block.index_select(0, flat).split(widths, dim=1)]
+            # One gather per dtype block; one split cuts out all of its entries (a slice each costs twice), called
+            # as split_with_sizes: Tensor.split's Python wrapper costs as much again.
+            columns = [c for block, widths in blocks for c in block.index_select(0, flat).split_with_sizes(widths, 1)]
             return self._assembled(columns, plan, n_nodes, flat.shape)
         if self.initialized and isinstance(index, slice) and index.step in (None, 1):
             # Consecutive rows (what a sampler reads after a write) as views of the blocks, without TorchRL's
             # per-entry indexing of the stored tensordict.
-            _, blocks, _, plan, n_nodes, steps = self._layout()
+            _, blocks, row_blocks, plan, n_nodes, steps = self._layout()
             first, stop, _ = index.indices(self.shape[0])
             stop = max(stop, first)
-            rows = [block[first * steps : stop * steps].unflatten(0, (stop - first, steps)) for block, _ in blocks]
-            columns = [c for row, (_, widths) in zip(rows, blocks) for c in row.split(widths, -1)]
+            columns = [c for (block, _), (_, widths) in zip(row_blocks, blocks)
+                       for c in block[first:stop].split_with_sizes(widths, -1)]
             return self._assembled(columns, plan, n_nodes, torch.Size([stop - first, steps]))
         return super().get(index)
 

@@ -47,7 +47,7 @@ def require_key(
             f"episode data has no key {key!r} (expected shape {_shape_text(trailing_shape)}); "
             f"present keys: {sorted(map(str, episodes.keys(True, True)))}"
         )
-    if value.ndim != 2 + len(trailing_shape) or any(
+    if value.ndim != 2 + len(trailing_shape) or value.shape[2:] != trailing_shape and any(  # zip() only for wildcards
         want is not None and got != want for got, want in zip(value.shape[2:], trailing_shape)
     ):
         raise ValueError(f"key {key!r} has shape {list(value.shape)}, expected {_shape_text(trailing_shape)}")
@@ -78,8 +78,8 @@ def checked(owner: str, name: str, value: float, *, minimum: float = 0.0, exclus
 
 def batch_normalised_weights(probabilities: torch.Tensor, n_episodes: int, beta: float) -> torch.Tensor:
     """Importance-sampling weights ``(N p)^-beta`` of the drawn episodes over the batch's largest (PER's form)."""
-    weights = (n_episodes * probabilities) ** (-beta)
-    return weights / weights.max()
+    weights = (n_episodes * probabilities).pow_(-beta)
+    return weights.div_(weights.max())
 
 
 def episode_positions(
@@ -94,9 +94,10 @@ def episode_positions(
 def stored_rows(index: torch.Tensor) -> torch.Tensor:
     """The sorted episode rows of a write's ``[n * T, 2]`` index (or of a 1-d index of rows)."""
     index = torch.as_tensor(index)
-    rows = (index[..., 0] if index.ndim > 1 else index).reshape(-1)
+    rows = (index.select(-1, 0) if index.ndim > 1 else index).flatten()
     # A buffer's index lists each row's steps together: collapsing those runs first leaves one entry a row.
-    return torch.unique(rows.unique_consecutive())
+    runs = rows.unique_consecutive()
+    return runs if runs.numel() == 1 else torch.unique(runs)
 
 
 def split_index(index: torch.Tensor | tuple) -> tuple[torch.Tensor, torch.Tensor]:
@@ -257,10 +258,10 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
             self._seen = counts.clone()
             if stale is not None:
                 self._seen[stale] = self._seen[-1] = -1
-        writes = int(counts[-1])
-        if writes == int(self._seen[-1]) or writes % 2:
+        writes, seen = int(counts[-1]), int(self._seen[-1])
+        if writes == seen or writes % 2:
             return
-        if written is not None and writes == int(self._seen[-1]) + 2:
+        if written is not None and writes == seen + 2:
             changed = written
         else:
             changed = (counts[:-1] != self._seen[:-1]).nonzero().squeeze(-1)
@@ -269,12 +270,12 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
             self._score_rows(changed, storage)
             if int(self._write_counts(storage)[-1]) != writes:  # read again: a worker's counts are a copy
                 return
-            self._seen[changed] = now
+            self._seen.index_copy_(0, changed, now)
         self._seen[-1] = writes
 
     def _score_rows(self, rows: torch.Tensor, storage: Storage) -> None:
-        first, last = int(rows[0]), int(rows[-1])
-        # A write is usually one run of consecutive rows: read it as a view, not a copy.
+        # A write is usually one run of consecutive rows (often one row): read it as a view, not a copy.
+        first, last = (int(rows),) * 2 if rows.numel() == 1 else (int(rows[0]), int(rows[-1]))
         episodes = storage.get(slice(first, last + 1)) if last - first + 1 == rows.numel() else storage.get(rows)
         self.write_priorities(rows, episodes, stored_lengths(storage, rows, self.end_key))
 
@@ -287,7 +288,9 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
             lengths = episode_lengths(episodes, self.end_key)
         valid = valid_steps(lengths, episodes.shape[1])
         priority = self.episode_priority(episodes, valid).to(torch.float64)
-        if priority.shape != rows.shape or not torch.isfinite(priority).all() or (priority < 0).any():
+        # One pass for both bounds: a NaN makes both NaN, which fails the first comparison.
+        low, high = torch.aminmax(priority) if priority.numel() else (0.0, 0.0)
+        if priority.shape != rows.shape or not (float(low) >= 0.0 and float(high) < math.inf):
             raise ValueError(
                 f"{type(self).__name__}.episode_priority must give {rows.numel()} finite "
                 f"non-negative priorities, got {priority}"
@@ -331,14 +334,14 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         lengths = stored_lengths(storage, rows, self.end_key)
         if self._cumulative_step_weights is None:
             return (self._uniform(rows.numel()) * lengths).long().clamp_(max=lengths - 1)
-        cumulative = self._cumulative_step_weights[rows]
+        cumulative = self._cumulative_step_weights.index_select(0, rows)
         mass = self._uniform(rows.numel(), 1) * cumulative[:, -1:]
         steps = torch.searchsorted(cumulative, mass, right=True).squeeze(-1)
         return torch.minimum(steps, lengths - 1)
 
     def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
         """Probability of drawing each of ``rows`` under the current priorities."""
-        return self._priorities[rows] / self._tree.query(0, self._tree.size)
+        return self._priorities.index_select(0, rows) / self._tree.query(0, self._tree.size)
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
         self._catch_up(storage)

@@ -1,6 +1,7 @@
 """Contact Energy Based Prioritization (CEBP): the paper's equations, its released code and that code's first commit."""
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import torch
@@ -13,6 +14,7 @@ from torchrl_cebp.replay.samplers.base import (FLOAT32_EPS, EpisodePrioritySampl
 
 # A gripper workspace box: (min xyz, max xyz). The per-task boxes are the env configs' ``gripper_workspace``.
 Workspace = tuple[tuple[float, float, float], tuple[float, float, float]]
+GRIPPER_POSITION = FETCH_OBSERVATION.gripper_position  # read once: the layout's attribute lookup costs a microsecond
 
 
 class _ContactEnergySampler(EpisodePrioritySampler):
@@ -41,28 +43,34 @@ class _ContactEnergySampler(EpisodePrioritySampler):
             keys[self.next_observation_key] = (None,)
         return keys
 
-    def _touch(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
-        """Left + right touch per valid step (0 on padding), ``[n, T]``."""
-        return require_key(episodes, self.touch_key, (2,)).double().sum(-1) * valid
+    def _touch(self, episodes: TensorDictBase) -> torch.Tensor:
+        """Left + right touch per step, ``[n, T]``; every form multiplies it by the displacement, 0 on padding."""
+        return require_key(episodes, self.touch_key, (2,)).sum(-1, dtype=torch.float64)
 
     def _displacement(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         """The object's displacement over each valid step (0 on padding), ``[n, T, 3]``."""
         positions = episode_positions(episodes, self.position_key, self.next_position_key)
-        return (positions[:, 1:] - positions[:, :-1]) * valid.unsqueeze(-1)
+        return positions.diff(dim=1) * valid.unsqueeze(-1)
 
     def _in_workspace(self, episodes: TensorDictBase) -> torch.Tensor:
         """Whether the gripper is inside the workspace box after each step (always, without a box), ``[n, T]``."""
         observation = require_key(episodes, self.next_observation_key, (None,))
         if self.workspace is None:
             return torch.ones(observation.shape[:2], dtype=torch.bool)
-        gripper = observation[..., FETCH_OBSERVATION.gripper_position].double()
-        low, high = (torch.tensor(corner, dtype=torch.float64) for corner in self.workspace)
+        low, high = _corners(self.workspace)
+        gripper = observation[..., GRIPPER_POSITION].double()  # once: a comparison of mixed dtypes converts each time
         return ((gripper >= low) & (gripper <= high)).all(-1)
 
     def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
         if n_episodes < self._warmup_episodes:
             return torch.ones_like(probabilities)
         return batch_normalised_weights(probabilities, n_episodes, self.beta)
+
+
+@lru_cache(maxsize=16)
+def _corners(workspace: Workspace) -> tuple[torch.Tensor, ...]:
+    """A box's two corners as float64 tensors, made once per box rather than on every write."""
+    return tuple(torch.tensor(corner, dtype=torch.float64) for corner in workspace)
 
 
 class CEBPSampler(_ContactEnergySampler):
@@ -107,7 +115,7 @@ class CEBPSampler(_ContactEnergySampler):
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
-        energy = torch.cumsum(self._touch(episodes, valid) * distance, dim=1)
+        energy = torch.cumsum(self._touch(episodes) * distance, dim=1)
         return (self.scale * torch.sigmoid(self.temperature * energy) * valid).sum(1)
 
     def __repr__(self) -> str:
@@ -149,9 +157,8 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         displacement = self._displacement(episodes, valid)
-        inside = self._in_workspace(episodes).unsqueeze(-1)
-        energy = torch.cumsum(displacement * self._touch(episodes, valid).unsqueeze(-1), dim=1) * inside
-        x = energy.sum(-1) * torch.linalg.vector_norm(displacement, dim=-1)
+        energy = torch.cumsum(displacement * self._touch(episodes).unsqueeze(-1), dim=1).sum(-1)
+        x = energy * self._in_workspace(episodes) * torch.linalg.vector_norm(displacement, dim=-1)
         centred = 100.0 * torch.sigmoid(self.k * x) - 50.0
         return centred.abs().sum(1) + FLOAT32_EPS
 
@@ -187,7 +194,7 @@ class InitialCEBPSampler(_ContactEnergySampler):
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
-        touch = self._touch(episodes, valid) * self._in_workspace(episodes)
+        touch = self._touch(episodes) * self._in_workspace(episodes)
         return (touch * distance).abs().sum(1) + FLOAT32_EPS
 
     def __repr__(self) -> str:

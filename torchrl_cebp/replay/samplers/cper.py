@@ -44,7 +44,7 @@ class CPERSampler(EpisodePrioritySampler):
         return {self.touch_key: (2,)}
 
     def step_weights(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
-        touch = require_key(episodes, self.touch_key, (2,)).double().sum(-1)
+        touch = require_key(episodes, self.touch_key, (2,)).sum(-1, dtype=torch.float64)
         rich = torch.cumsum(touch, dim=1) > self.threshold
         return torch.where(rich, self.lam, 1.0) * valid
 

@@ -58,7 +58,7 @@ class EBPSampler(EpisodePrioritySampler):
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         positions = episode_positions(episodes, self.position_key, self.next_position_key)
         height = positions[:, 1:, 2] - positions[:, :1, 2]
-        velocity = (positions[:, 1:] - positions[:, :-1]) / STEP_SECONDS
+        velocity = positions.diff(dim=1) / STEP_SECONDS
         energy = self.w_potential * GRAVITY * MASS * height + self.w_kinetic * 0.5 * MASS * velocity.pow(2).sum(-1)
         increase = torch.cat([energy[:, :1], energy.diff(dim=1)], dim=1)
         trajectory_energy = (increase.clamp(0.0, self.clip_energy) * valid).sum(1)

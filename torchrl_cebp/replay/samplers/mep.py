@@ -116,9 +116,12 @@ class MEPSampler(EpisodePrioritySampler):
         self._rank_stored()
 
     def _rank_stored(self) -> None:
-        """Dense ranks from 0 of every stored episode's score, as priorities."""
-        rows = torch.arange(self.n_episodes)
-        self.set_priorities(rows, self._rank_priorities(torch.unique(self._scores[rows], return_inverse=True)[1]))
+        """Dense ranks from 0 of every stored episode's score, as priorities; only those that changed are set."""
+        n = self.n_episodes
+        # numpy's unique sorts some five times faster than torch's on one thread; the ranks are the same.
+        priority = self._rank_priorities(torch.from_numpy(np.unique(self._scores[:n].numpy(), return_inverse=True)[1]))
+        changed = (priority != self._priorities[:n]).nonzero().squeeze(-1)
+        self.set_priorities(changed, priority.index_select(0, changed))
 
     def _rank_priorities(self, ranks: torch.Tensor) -> torch.Tensor:
         # A table, so that a rank's priority does not depend on which rows are written with it.

@@ -12,7 +12,7 @@ from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
-from torchrl_cebp.replay.episodes import stored_lengths, valid_steps
+from torchrl_cebp.replay.episodes import shared_length, stored_lengths, valid_steps
 from torchrl_cebp.replay.samplers.base import checked, stored_rows
 
 # Written beside TorchRL's files by PERSampler.dumps.
@@ -81,6 +81,8 @@ class PERSampler(PrioritizedSampler):
                 f"({storage.max_size // row_length} episodes of {row_length} steps, the capacity rounded up to whole "
                 f"episodes): build it with capacity={storage.max_size}"
             )
+        if shared_length(storage, self.end_key) == row_length:  # every stored episode whole: no padding to exclude
+            return
         rows = stored_rows(index)
         padding = ~valid_steps(stored_lengths(storage, rows, self.end_key), row_length)
         if padding.any():

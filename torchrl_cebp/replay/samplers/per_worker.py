@@ -58,7 +58,9 @@ class WorkerLayout:
     def global_rows(self, local_rows: torch.Tensor, worker: int | torch.Tensor) -> torch.Tensor:
         """The storage rows of ``worker``'s (one, or one per row) ``local_rows``."""
         e = self.episodes_per_worker
-        return local_rows // e * self.cycle + worker * e + local_rows % e
+        # q e + r -> q (e W) + r as one division and two adds (a division costs three adds): a draw maps all its rows.
+        rows = torch.add(local_rows, local_rows // e, alpha=self.cycle - e)
+        return rows.add_(worker, alpha=e) if isinstance(worker, torch.Tensor) else rows.add_(worker * e)
 
     def rows_of_worker(self, rows: int, worker: int) -> int:
         """How many of a storage's first ``rows`` rows are ``worker``'s; worker 0 has the most."""
@@ -94,7 +96,7 @@ class WorkerRows(_upstream.StorageView, Storage):
     def __init__(self, storage: Storage, worker: int, layout: WorkerLayout) -> None:
         self.storage, self.worker, self.layout = storage, worker, layout
         self.end_key: NestedKey | None = getattr(storage, "end_key", None)  # where the storage cuts episodes, if it does
-        self._gathered: tuple[torch.Tensor, int, torch.Tensor] | None = None  # write_counts, until a write
+        self._gathered: tuple | None = None  # the counts, their total (a view), and write_counts until a write
 
     @property
     def device(self) -> torch.device:
@@ -106,7 +108,8 @@ class WorkerRows(_upstream.StorageView, Storage):
 
     @property
     def shape(self) -> torch.Size:
-        return torch.Size([self.layout.rows_of_worker(self.storage.shape[0], self.worker), self.storage.shape[1]])
+        rows, steps = self.storage.shape  # read once: TorchRL's PER asks a view's shape or length 5 times a draw
+        return torch.Size((self.layout.rows_of_worker(rows, self.worker), steps))
 
     @property
     def max_size(self) -> int:
@@ -114,7 +117,8 @@ class WorkerRows(_upstream.StorageView, Storage):
         return self.layout.rows_of_worker(self.storage.max_size // row_length, self.worker) * row_length
 
     def __len__(self) -> int:
-        return self.shape.numel()
+        rows, steps = self.storage.shape  # as shape does, without building a torch.Size: TorchRL's PER asks 4 times
+        return self.layout.rows_of_worker(rows, self.worker) * steps
 
     def get(self, index: slice | torch.Tensor | tuple) -> TensorDictBase:
         if isinstance(index, slice):
@@ -153,11 +157,15 @@ class WorkerRows(_upstream.StorageView, Storage):
         counts = getattr(self.storage, "write_counts", None)
         if counts is None:
             return None
-        writes = int(counts[-1])  # read first: a write during the gather renews it at the next call
-        if self._gathered is None or self._gathered[0] is not counts or self._gathered[1] != writes:
+        if self._gathered is None or self._gathered[0] is not counts:  # a view of the total: int() of it costs a
+            self._gathered = counts, counts[-1], None, None  # third of int(counts[-1]), and every draw reads it
+        _, total, seen, gathered = self._gathered
+        writes = int(total)  # read first: a write during the gather renews it at the next call
+        if writes != seen:
             rows = self.global_rows(torch.arange(self.layout.rows_of_worker(counts.numel() - 1, self.worker)))
-            self._gathered = counts, writes, torch.cat([counts.index_select(0, rows), torch.tensor([writes])])
-        return self._gathered[2]
+            gathered = torch.cat([counts.index_select(0, rows), torch.tensor([writes])])
+            self._gathered = counts, total, writes, gathered
+        return gathered
 
 
 class PerWorkerSampler(Sampler):
