@@ -45,7 +45,8 @@ def shipped_agent(task: str) -> Path:
         shipped = sorted(name for name, file in SHIPPED_AGENTS.items() if file.is_file())
         raise FileNotFoundError(
             f"the {task} agent is not in this installation ({path} is missing); shipped here: {shipped}. "
-            f"Train one with `python train.py preset=paper env={task}` and pass its run folder instead."
+            f"Train one at the paper's scale (`python train.py preset=paper env={task}`; the agents page of the docs "
+            "gives each shipped agent's command) and pass its run folder instead."
         )
     return path
 
