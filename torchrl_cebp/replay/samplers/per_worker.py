@@ -157,8 +157,9 @@ class WorkerRows(_upstream.StorageView, Storage):
         counts = getattr(self.storage, "write_counts", None)
         if counts is None:
             return None
-        if self._gathered is None or self._gathered[0] is not counts:  # a view of the total: int() of it costs a
-            self._gathered = counts, counts[-1], None, None  # third of int(counts[-1]), and every draw reads it
+        # The total is kept as a 0-d view: int() of it costs a third of int(counts[-1]), and every draw reads it.
+        if self._gathered is None or self._gathered[0] is not counts:
+            self._gathered = counts, counts[-1], None, None
         _, total, seen, gathered = self._gathered
         writes = int(total)  # read first: a write during the gather renews it at the next call
         if writes != seen:
