@@ -157,8 +157,7 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         displacement = self._displacement(episodes, valid)
-        # The code's energy vector, summed: the sum over x, y, z commutes with the cumsum, so it comes first.
-        energy = torch.cumsum(displacement.sum(-1) * self._touch(episodes), dim=1)
+        energy = torch.cumsum(displacement.sum(-1) * self._touch(episodes), dim=1)  # summed over xyz first: commutes
         x = energy * self._in_workspace(episodes) * torch.linalg.vector_norm(displacement, dim=-1)
         centred = 100.0 * torch.sigmoid(self.k * x) - 50.0
         return centred.abs().sum(1) + FLOAT32_EPS

@@ -95,7 +95,7 @@ class WorkerRows(_upstream.StorageView, Storage):
     # Storage.__init__ is not called: it sets max_size, which a view reads from the storage it views.
     def __init__(self, storage: Storage, worker: int, layout: WorkerLayout) -> None:
         self.storage, self.worker, self.layout = storage, worker, layout
-        self.end_key: NestedKey | None = getattr(storage, "end_key", None)  # where the storage cuts episodes, if it does
+        self.end_key: NestedKey | None = getattr(storage, "end_key", None)  # the storage's episode cut, if any
         self._gathered: tuple | None = None  # the counts, their total (a view), and write_counts until a write
 
     @property
