@@ -31,11 +31,10 @@ STRIP_FRAMES = 6
 
 
 def main(argv: list[str] | None = None) -> int:
-    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS
+    from torchrl_cebp.agents.shipped import FETCH_AGENTS
 
-    fetch_tasks = sorted(task for task in SHIPPED_AGENTS if not task.startswith("franka"))
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("task", choices=fetch_tasks, help="the task the agent ships for")
+    parser.add_argument("task", choices=FETCH_AGENTS, help="the task the agent ships for")
     parser.add_argument("policy", type=Path, help="the run's best_policy.pt or policy.pt")
     parser.add_argument("--overrides", nargs="+", metavar="OVERRIDE",
                         help="the run's train.py overrides, checked against its checkpoint (default: the run folder's "
@@ -163,15 +162,11 @@ def write_frame_strip(frames: list[np.ndarray], path: Path) -> Path:
 
 def write_cards(page: Path) -> None:
     """Replaces the text between the page's card markers with the cards of every shipped Fetch agent."""
-    import torch
+    from torchrl_cebp.agents.shipped import FETCH_AGENTS, SHIPPED_AGENTS
+    from torchrl_cebp.training.checkpoint import read_policy_state
 
-    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS
-
-    cards = [
-        model_card(task, torch.load(path, map_location="cpu", weights_only=True))
-        for task, path in sorted(SHIPPED_AGENTS.items())
-        if path.is_file() and not task.startswith("franka")
-    ]
+    cards = [model_card(task, read_policy_state(SHIPPED_AGENTS[task])) for task in FETCH_AGENTS
+             if SHIPPED_AGENTS[task].is_file()]
     text = page.read_text()
     head, rest = text.split(CARDS_START)
     tail = rest.split(CARDS_END)[1]

@@ -4,11 +4,9 @@ import pytest
 import torch
 
 from torchrl_cebp.agents import SHIPPED_AGENTS
-from torchrl_cebp.agents.shipped import SHIPPING_BAR
+from torchrl_cebp.agents.shipped import FETCH_AGENTS, SHIPPING_BAR
 from torchrl_cebp.evaluate import success_rate
 from torchrl_cebp.training.checkpoint import POLICY_FORMAT
-
-FETCH_AGENTS = sorted(task for task in SHIPPED_AGENTS if not task.startswith("franka"))
 
 
 def shipped(task: str):

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["SHIPPED_AGENTS", "SHIPPING_BAR", "shipped_agent"]
+from torchrl_cebp.envs.goal_spaces import TASKS
+
+__all__ = ["FETCH_AGENTS", "SHIPPED_AGENTS", "SHIPPING_BAR", "shipped_agent"]
 
 _PACKAGE = Path(__file__).parents[1]
 
@@ -15,6 +17,9 @@ SHIPPED_AGENTS: dict[str, Path] = {
     "push": _PACKAGE / "agents" / "policies" / "push.pt",
     "franka_pick_place": _PACKAGE / "sim2real" / "policies" / "franka_pick_place_cebp.pt",
 }
+
+# The Fetch tasks' agents (robot A's), whose cards docs/agents.md carries; the Franka policy's page is the Sim2Real one.
+FETCH_AGENTS: tuple[str, ...] = tuple(task for task in SHIPPED_AGENTS if task in TASKS)
 
 # The success over 100 fresh episodes an agent needs before it ships (the Franka one: of the camera loop's length).
 SHIPPING_BAR: dict[str, float] = {"pick_place": 0.85, "push": 0.95, "franka_pick_place": 0.8}
