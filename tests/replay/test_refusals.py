@@ -76,6 +76,20 @@ def test_a_write_lacking_a_stored_entry_is_refused_and_stores_nothing():
     assert len(rb) == 2 * T
 
 
+def test_a_write_whose_entries_change_shape_is_refused_and_stores_nothing():
+    rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=10 * T)
+    rb.extend(make_episodes(2))
+    reshaped = make_episodes(2, seed=1)
+    # One feature moved from the observation to the goal: the same floats a step, which the blocks would shift.
+    reshaped["observation"] = reshaped["observation"][..., :-1]
+    reshaped["desired_goal"] = torch.cat([reshaped["desired_goal"], reshaped["desired_goal"][..., :1]], -1)
+    with pytest.raises(ValueError, match=r"entry 'observation' has 24 values per step, but the storage holds 25"):
+        rb.extend(reshaped)
+    assert len(rb) == 2 * T and rb.write_count == 2
+    rb.extend(make_episodes(1, seed=2))  # into row 2: the refused write left the cursor where it was
+    assert torch.equal(rb.storage.get(torch.tensor([2]))["observation"], make_episodes(1, seed=2)["observation"])
+
+
 @pytest.mark.parametrize("writer", [None, EpisodeWriter(T)])
 def test_a_first_write_its_sampler_cannot_score_stores_nothing(writer):
     rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=10 * T, writer=writer)

@@ -102,27 +102,27 @@ class _EpisodeRows:
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if not isinstance(data, TensorDictBase):
             return self._store(cursor, data, set_cursor, exact=False)
-        try:  # every check before any row changes: a refused write stores nothing
+        known, counting = self._lengths is not None, False
+        try:  # every check before any row changes (the store's of shapes too): a refused write stores nothing
             exact, lengths = self._check_rows(data)
             for buffer in _upstream.attached_buffers(self):
                 check = getattr(buffer.sampler, "check_episodes", None)
                 if check is not None:
                     check(data)
+            if known:
+                rows = cursor.reshape(-1) if isinstance(cursor, torch.Tensor) else (
+                    torch.arange(self.max_size // self._steps)[cursor].reshape(-1))
+                self._write_counts[-1].add_(1)  # odd while the rows change (add_: no copy back, as += makes)
+                counting = True
+            self._store(cursor, data, set_cursor, exact=exact)
+            if known:
+                self._set_lengths(rows, lengths)
         except Exception:
             if set_cursor and isinstance(cursor, torch.Tensor) and cursor.numel():
                 _upstream.rewind_writers(self, cursor.reshape(-1))
             raise
-        known = self._lengths is not None
-        if known:
-            rows = cursor.reshape(-1) if isinstance(cursor, torch.Tensor) else (
-                torch.arange(self.max_size // self._steps)[cursor].reshape(-1))
-            self._write_counts[-1].add_(1)  # odd while the rows change (add_: no copy back, as += makes)
-        try:
-            self._store(cursor, data, set_cursor, exact=exact)
-            if known:
-                self._set_lengths(rows, lengths)
         finally:
-            if known:
+            if counting:
                 self._write_counts[rows] += 1  # a row written twice in one write counts once: still a change
                 self._write_counts[-1].add_(1)
         if not known:  # the first write: every filled row from its flags, each counted written
@@ -316,11 +316,15 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             if isinstance(data, TensorDictBase):
                 self._layout()
             return
-        self._layout()
+        layout = self._layout()
         # One pass over the entries costs a third of a get each; no reshape of entries already [n, T, width].
         rows, shape, entries = [], (*data.shape, -1), dict(data.items(True, True))
-        for block, keys in self._laid_out.row_blocks:
+        for (block, keys), (_, widths) in zip(layout.row_blocks, layout.blocks):
             parts = [value if value.ndim == 3 else value.reshape(shape) for value in map(entries.__getitem__, keys)]
+            if [part.shape[-1] for part in parts] != widths:  # else entries of other widths but the same sum shift
+                key, got, width = next((k, p.shape[-1], w) for k, p, w in zip(keys, parts, widths) if p.shape[-1] != w)
+                raise ValueError(f"entry {key!r} has {got} values per step, but the storage holds {width}: a write "
+                                 "keeps each entry's shape")
             rows.append((block, parts[0] if len(parts) == 1 else torch.cat(parts, dim=-1)))
         _upstream.record_write(self, cursor, data, set_cursor)
         for block, values in rows:

@@ -5,13 +5,8 @@ from torchrl_cebp.replay.samplers.cper import CPERSampler
 from torchrl_cebp.replay.samplers.ebp import EBPSampler
 from torchrl_cebp.replay.samplers.mep import MEPSampler
 from torchrl_cebp.replay.samplers.per import PERSampler
-from torchrl_cebp.replay.samplers.per_worker import (
-    EpisodePerWorkerSampler,
-    PerWorkerSampler,
-    PrioritizedPerWorkerSampler,
-    WorkerLayout,
-    WorkerRows,
-)
+from torchrl_cebp.replay.samplers.per_worker import (EpisodePerWorkerSampler, PerWorkerSampler,
+                                                     PrioritizedPerWorkerSampler, WorkerLayout, WorkerRows)
 from torchrl_cebp.replay.samplers.uniform import UniformEpisodeSampler
 
 __all__ = [
