@@ -42,10 +42,20 @@ def test_the_command_prints_the_success_rate_a_plain_loop_measures(capsys):
     assert capsys.readouterr().out == f"{SHIPPED_POLICY}: success rate over 4 episodes: {expected:.3f}\n"
 
 
+def test_the_episode_length_can_be_set_and_is_named(capsys):
+    main(["--task", "franka_pick_place", "--episodes", "4", "--episode-steps", "5"])
+    expected = plain_gymnasium_success_rate(
+        load_policy(SHIPPED_POLICY), lambda: make_franka(max_episode_steps=5), range(1234, 1238))
+    assert capsys.readouterr().out == f"{SHIPPED_POLICY}: success rate over 4 episodes of 5 steps: {expected:.3f}\n"
+    assert expected == 0.0  # too short to place the cube, which it does in 50 steps: the length reached the env
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [
         ([], "give either a policy .* or --task, not both or neither"),
+        (["--task", "push", "--episode-steps", "0"], "--episode-steps must be at least 1, got 0"),
+        (["--task", "push", "--video-episodes", "-1"], "--video-episodes must be at least 1, got -1"),
         (["runs/x", "--task", "push"], "give either a policy .* or --task, not both or neither"),
         (["--task", "slide"], r"invalid choice: 'slide' \(choose from .*franka_pick_place.*pick_place.*push"),
         (["--task", "push", "--video", "push.avi"], r"unknown format '\.avi'; valid: \['\.mp4', '\.gif'\]"),

@@ -22,24 +22,28 @@ from torchrl_cebp.training.checkpoint import UnreadableFileError, read_policy
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
 
-def _policy_and_env(checkpoint: str | Path, **kwargs):
+def _policy_and_env(checkpoint: str | Path, episode_steps: int | None = None, **kwargs):
     """The policy and the env its run trained on (task, goal space, robot), from one read of the file.
 
-    ``kwargs`` go to ``make_env``.
+    ``episode_steps`` replaces the length its episodes had; ``kwargs`` go to ``make_env``.
     """
     from torchrl_cebp.envs import make_env_from_config
 
     policy, state = read_policy(checkpoint)
-    return policy, make_env_from_config(state["env"], **kwargs)
+    env = state["env"] if episode_steps is None else {**state["env"], "episode_steps": episode_steps}
+    return policy, make_env_from_config(env, **kwargs)
 
 
-def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -> float:
+def success_rate(
+    checkpoint: str | Path, episodes: int = 10, seed: int = 1234, episode_steps: int | None = None
+) -> float:
     """Fraction of ``episodes`` deterministic episodes that end within the goal threshold (the trainer's measure).
 
     Args:
         checkpoint (str or Path): a run directory, its ``checkpoint.pt``, or a policy file.
         episodes (int, optional): the test episodes, run side by side. Defaults to ``10``.
         seed (int, optional): seeds the envs. Defaults to ``1234``.
+        episode_steps (int, optional): the episodes' length. Defaults to ``None``, the length the policy trained on.
 
     Raises:
         FileNotFoundError: there is no such file.
@@ -47,13 +51,14 @@ def success_rate(checkpoint: str | Path, episodes: int = 10, seed: int = 1234) -
     """
     from torchrl_cebp.training.evaluation import evaluate_success_rate
 
-    policy, env = _policy_and_env(checkpoint, seed=seed, num_envs=episodes)
+    policy, env = _policy_and_env(checkpoint, episode_steps, seed=seed, num_envs=episodes)
     return evaluate_success_rate(env, policy, episodes)
 
 
 @torch.no_grad()
 def render_episodes(
-    checkpoint: str | Path, episodes: int = 2, seed: int = 1234, size: tuple[int, int] = (480, 360)
+    checkpoint: str | Path, episodes: int = 2, seed: int = 1234, size: tuple[int, int] = (480, 360),
+    episode_steps: int | None = None,
 ) -> list[np.ndarray]:
     """The RGB frames of ``episodes`` deterministic episodes, one after the other, rendered offscreen.
 
@@ -62,8 +67,9 @@ def render_episodes(
         episodes (int, optional): the episodes rendered. Defaults to ``2``.
         seed (int, optional): seeds the env. Defaults to ``1234``.
         size (tuple of int, optional): the frames' ``(width, height)``. Defaults to ``(480, 360)``.
+        episode_steps (int, optional): the episodes' length. Defaults to ``None``, the length the policy trained on.
     """
-    policy, env = _policy_and_env(checkpoint, seed=seed, render_size=size)
+    policy, env = _policy_and_env(checkpoint, episode_steps, seed=seed, render_size=size)
     frames = []
     try:
         for _ in range(episodes):
@@ -85,6 +91,7 @@ def record_video(
     seed: int = 1234,
     size: tuple[int, int] = (480, 360),
     fps: int = 25,
+    episode_steps: int | None = None,
 ) -> Path:
     """Renders ``episodes`` deterministic episodes to ``path`` (``.mp4`` or ``.gif``).
 
@@ -95,12 +102,13 @@ def record_video(
         seed (int, optional): seeds the env. Defaults to ``1234``.
         size (tuple of int, optional): the frames' ``(width, height)``. Defaults to ``(480, 360)``.
         fps (int, optional): frames per second. Defaults to ``25``.
+        episode_steps (int, optional): the episodes' length. Defaults to ``None``, the length the policy trained on.
 
     Returns:
         the video's path.
     """
     path = video_path(path)
-    return write_video(render_episodes(checkpoint, episodes, seed, size), path, fps)
+    return write_video(render_episodes(checkpoint, episodes, seed, size, episode_steps), path, fps)
 
 
 def video_path(path: str | Path) -> Path:
@@ -166,11 +174,17 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--episodes", type=int, default=10, help="test episodes for the success rate")
     parser.add_argument("--video", help="write a video of a few episodes here (.mp4 or .gif)")
-    parser.add_argument("--video-episodes", type=int, default=2)
-    parser.add_argument("--seed", type=int, default=1234)
+    parser.add_argument("--video-episodes", type=int, default=2, help="episodes in the video, one after the other")
+    parser.add_argument("--seed", type=int, default=1234, help="seeds the episodes: episode i gets SEED + i")
+    parser.add_argument(
+        "--episode-steps", type=int,
+        help="the episodes' length (default: the length the policy trained on; the Franka card's is 100, the loop's)",
+    )
     args = parser.parse_args(argv)
-    if args.episodes < 1:
-        parser.error(f"--episodes must be at least 1, got {args.episodes}")
+    for option in ("episodes", "video_episodes", "episode_steps"):
+        value = getattr(args, option)
+        if value is not None and value < 1:
+            parser.error(f"--{option.replace('_', '-')} must be at least 1, got {value}")
     if (args.checkpoint is None) == (args.task is None):
         parser.error("give either a policy (a run directory or a file) or --task, not both or neither")
     try:
@@ -180,12 +194,14 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(str(error))
     try:
         checkpoint = shipped_agent(args.task) if args.task else args.checkpoint
-        rate = success_rate(checkpoint, args.episodes, args.seed)
+        rate = success_rate(checkpoint, args.episodes, args.seed, args.episode_steps)
     except (FileNotFoundError, UnreadableFileError) as error:
         parser.exit(2, f"error: {error}\n")
-    print(f"{checkpoint}: success rate over {args.episodes} episodes: {rate:.3f}")
+    length = "" if args.episode_steps is None else f" of {args.episode_steps} steps"
+    print(f"{checkpoint}: success rate over {args.episodes} episodes{length}: {rate:.3f}")
     if args.video:
-        print(f"wrote {record_video(checkpoint, args.video, args.video_episodes, args.seed)}")
+        video = record_video(checkpoint, args.video, args.video_episodes, args.seed, episode_steps=args.episode_steps)
+        print(f"wrote {video}")
 
 
 if __name__ == "__main__":
