@@ -5,7 +5,8 @@ The policy file (a run's ``best_policy.pt`` or ``policy.pt``) is scored over ``-
 ``evaluate``'s measure, from seeds the trainer's test episodes never used. At or above the task's bar
 (``torchrl_cebp.agents.SHIPPING_BAR``: 0.85 for PickAndPlace, 0.95 for Push) it is written to the package
 (``torchrl_cebp.agents.SHIPPED_AGENTS``) with a model card: the sampler, the training command, the code commit and
-training time of its run (from the run's ``progress.csv``), and the score. The card's command is the run's ``train.py``
+training time of its run (from the run's ``progress.csv``), and the score. It must also pass the test suite's check
+(``torchrl_cebp.agents.SUITE_CHECK``: 8 of 10 episodes from other fresh seeds). The card's command is the run's ``train.py``
 overrides (its ``.hydra/overrides.yaml``, or ``--overrides``), checked against the run's checkpoint: it rebuilds the run.
 Then it writes ``docs/img/agent_<task>.mp4`` (two episodes), ``docs/img/agent_<task>_frames.png`` (six frames of
 the first half of one episode) and the cards of every shipped agent into ``docs/agents.md``.
@@ -66,6 +67,7 @@ def card_state(task: str, policy: Path, overrides: list[str], episodes: int) -> 
     """The policy file's state with its ``card``, after the checks that it is the task's agent and its command."""
     from hydra import compose, initialize_config_dir
 
+    from torchrl_cebp.agents.shipped import SUITE_CHECK
     from torchrl_cebp.evaluate import success_rate
     from torchrl_cebp.training.checkpoint import RunCheckpoints, read_policy_state
     from torchrl_cebp.training.config import check_same_run
@@ -82,6 +84,8 @@ def card_state(task: str, policy: Path, overrides: list[str], episodes: int) -> 
         rows = list(csv.DictReader(file))
     score = success_rate(policy, episodes, FRESH_SEED)
     print(f"[ship] {policy}: {episodes} fresh episodes (seeds {FRESH_SEED}+): success {score:.3f}")
+    suite = success_rate(policy, int(SUITE_CHECK["episodes"]), int(SUITE_CHECK["seed"]))
+    print(f"[ship] the test suite's {SUITE_CHECK['episodes']:.0f} episodes (seed {SUITE_CHECK['seed']:.0f}): {suite:.3f}")
     last = rows[-1]
     card = {
         "sampler": f"{saved['sampler']['_target_'].rsplit('.', 1)[1]}, HER '{saved['replay']['strategy']}'",
@@ -95,19 +99,24 @@ def card_state(task: str, policy: Path, overrides: list[str], episodes: int) -> 
         "success": score,
         "episodes": episodes,
         "seed": FRESH_SEED,
+        "suite_check": suite,
     }
     return {**state, "card": card}
 
 
 def ship(task: str, state: dict, force: bool) -> None:
     """Writes the policy file, its video and frame strip, and the agents page's cards; refuses below the bar."""
-    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS, SHIPPING_BAR
+    from torchrl_cebp.agents.shipped import SHIPPED_AGENTS, SHIPPING_BAR, SUITE_CHECK
     from torchrl_cebp.evaluate import render_episodes, write_video
     from torchrl_cebp.training.checkpoint import save_policy
 
     score, bar = state["card"]["success"], SHIPPING_BAR[task]
     if score < bar and not force:
         sys.exit(f"[ship] {score:.3f} is below the {task} bar of {bar}: not shipped (--force ships it anyway)")
+    suite = state["card"]["suite_check"]
+    if suite < SUITE_CHECK["success"] and not force:
+        sys.exit(f"[ship] {suite:.3f} over the test suite's {SUITE_CHECK['episodes']:.0f} episodes (seed "
+                 f"{SUITE_CHECK['seed']:.0f}) is below its {SUITE_CHECK['success']}: not shipped, the suite would fail")
     path = SHIPPED_AGENTS[task]
     path.parent.mkdir(parents=True, exist_ok=True)
     save_policy(state, path)

@@ -231,6 +231,7 @@ def test_the_sim2real_training_script_resumes_the_shipped_policys_run_with_its_s
 def test_ship_agent_checks_the_runs_command_and_ships_only_at_the_tasks_bar(tiny_run, tmp_path, monkeypatch):
     from tests.tiny_run import TINY, TINY_RUN
     from torchrl_cebp.agents.shipped import SHIPPED_AGENTS
+    from torchrl_cebp.evaluate import success_rate
     from torchrl_cebp.training import load_policy
     from torchrl_cebp.training.config import ConfigError
 
@@ -248,6 +249,9 @@ def test_ship_agent_checks_the_runs_command_and_ships_only_at_the_tasks_bar(tiny
     assert card["epochs"] == 2 and card["sampler"] == "UniformEpisodeSampler, HER 'future'" and card["episodes"] == 2
     with pytest.raises(SystemExit, match=r"0\.500 is below the push bar of 0\.95: not shipped"):
         ship.ship("push", {**state, "card": {**card, "success": 0.5}}, force=False)
+    assert card["suite_check"] == success_rate(policy, 10, 777)  # what tests/agents asks of a shipped agent
+    with pytest.raises(SystemExit, match=r"0\.700 over the test suite's 10 episodes \(seed 777\) is below its 0\.8: not"):
+        ship.ship("push", {**state, "card": {**card, "success": 0.96, "suite_check": 0.7}}, force=False)
 
     monkeypatch.setitem(SHIPPED_AGENTS, "push", tmp_path / "package" / "push.pt")
     monkeypatch.setattr(ship, "REPO", tmp_path)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from torchrl_cebp.envs.goal_spaces import TASKS
 
-__all__ = ["FETCH_AGENTS", "SHIPPED_AGENTS", "SHIPPING_BAR", "shipped_agent"]
+__all__ = ["FETCH_AGENTS", "SHIPPED_AGENTS", "SHIPPING_BAR", "SUITE_CHECK", "shipped_agent"]
 
 _PACKAGE = Path(__file__).parents[1]
 
@@ -23,6 +23,10 @@ FETCH_AGENTS: tuple[str, ...] = tuple(task for task in SHIPPED_AGENTS if task in
 
 # The success over 100 fresh episodes an agent needs before it ships (the Franka one: of the camera loop's length).
 SHIPPING_BAR: dict[str, float] = {"pick_place": 0.85, "push": 0.95, "franka_pick_place": 0.8}
+
+# What the test suite asks of every shipped Fetch agent: this success over this many episodes, from seeds that neither
+# the trainer's test episodes nor the card's score used. The ship script refuses an agent that would fail it.
+SUITE_CHECK: dict[str, float] = {"episodes": 10, "seed": 777, "success": 0.8}
 
 
 def shipped_agent(task: str) -> Path:
