@@ -3,7 +3,17 @@
 # system library for offscreen MuJoCo rendering. Usage: bash scripts/setup.sh [extras]
 set -euo pipefail
 cd "$(dirname "$0")/.."
+case "${1:-}" in
+  -h|--help) sed -n '2,3p' "$0" | cut -c3-; echo "extras: comma-separated, of pyproject.toml's (default: test)"; exit 0 ;;
+esac
 extras="${1:-test}"
+known=$(sed -n '/^\[project.optional-dependencies\]/,/^\[/s/^\([a-z0-9_-]*\) = .*/\1/p' pyproject.toml | tr '\n' ' ')
+for extra in ${extras//,/ }; do
+  if [[ " $known" != *" $extra "* ]]; then
+    echo "[setup] unknown extra '$extra'; pyproject.toml has: ${known% }" >&2
+    exit 2
+  fi
+done
 
 if ! ldconfig -p 2>/dev/null | grep -q libOSMesa; then
   if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then

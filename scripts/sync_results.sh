@@ -6,8 +6,16 @@
 # Usage: bash scripts/sync_results.sh [--every SECONDS]
 set -uo pipefail
 cd "$(dirname "$0")/.."
+usage() { sed -n '2,6p' "$0" | cut -c3-; }
 every=0
-[ "${1:-}" = "--every" ] && every=${2:?--every needs seconds}
+case "${1:-}" in
+  "") ;;
+  -h|--help) usage; exit 0 ;;
+  --every)
+    every=${2:-}
+    if ! [[ "$every" =~ ^[1-9][0-9]*$ ]]; then echo "--every needs a number of seconds, got '${every}'" >&2; exit 2; fi ;;
+  *) echo "unknown option ${1}: the only option is --every SECONDS" >&2; exit 2 ;;
+esac
 sync_once() {
   local copied=()
   while IFS= read -r csv; do

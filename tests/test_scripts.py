@@ -273,3 +273,24 @@ def iio_read(path: Path):
     import imageio.v3 as iio
 
     return iio.imread(path)
+
+
+@pytest.mark.parametrize("script", sorted(path.name for path in (REPO / "scripts").glob("*.sh")))
+def test_every_shell_script_explains_itself_on_help_and_changes_nothing(script):
+    status = subprocess.run(["git", "status", "--porcelain"], cwd=REPO, capture_output=True, text=True).stdout
+    out = subprocess.run(["bash", f"scripts/{script}", "--help"], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and len(out.stdout.split()) >= 8, (out.stdout, out.stderr)
+    assert subprocess.run(["git", "status", "--porcelain"], cwd=REPO, capture_output=True, text=True).stdout == status
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["setup.sh", "tests"], r"unknown extra 'tests'; pyproject.toml has: test bench real loggers slurm docs"),
+        (["sync_results.sh", "--every"], "--every needs a number of seconds, got ''"),
+        (["sync_results.sh", "--dry-run"], "unknown option --dry-run: the only option is --every SECONDS"),
+    ],
+)
+def test_a_shell_script_refuses_an_unknown_argument_before_it_acts(argv, message):
+    out = subprocess.run(["bash", f"scripts/{argv[0]}", *argv[1:]], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and message in out.stderr

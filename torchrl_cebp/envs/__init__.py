@@ -6,6 +6,16 @@ Example:
     torch.Size([2])
 """
 
+import contextlib
+import io
+import sys
+
+# gymnasium-robotics prints, at import, a notice on its Adroit tasks' reward versions: on every command of ours, about
+# no task of ours. Imported first here, with that notice kept off the terminal and anything else it prints let through.
+with contextlib.redirect_stderr(io.StringIO()) as _printed:
+    import gymnasium_robotics  # noqa: F401
+sys.stderr.write("".join(line for line in _printed.getvalue().splitlines(True) if "AdroitHand" not in line))
+
 from torchrl_cebp.envs.franka import FRANKA_TASK, FrankaPickPlaceEnv, make_franka
 from torchrl_cebp.envs.franka import register as register_franka
 from torchrl_cebp.envs.goal_spaces import GOAL_SPACES, TASKS
