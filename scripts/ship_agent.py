@@ -5,8 +5,8 @@ The policy file (a run's ``best_policy.pt`` or ``policy.pt``) is scored over ``-
 ``evaluate``'s measure, from seeds the trainer's test episodes never used. At or above the task's bar
 (``torchrl_cebp.agents.SHIPPING_BAR``: 0.85 for PickAndPlace, 0.95 for Push) it is written to the package
 (``torchrl_cebp.agents.SHIPPED_AGENTS``) with a model card: the sampler, the training command, the code commit and
-training time of its run (from the run's ``progress.csv``), and the score. It must also pass the test suite's check
-(``torchrl_cebp.agents.SUITE_CHECK``: 8 of 10 episodes from other fresh seeds). The card's command is the run's ``train.py``
+training time of its run (from the run's ``progress.csv``), and the score. It must also pass the test suite's
+check (``SUITE_CHECK``: 8 of 10 episodes from other fresh seeds). The card's command is the run's ``train.py``
 overrides (its ``.hydra/overrides.yaml``, or ``--overrides``), checked against the run's checkpoint: it rebuilds the run.
 Then it writes ``docs/img/agent_<task>.mp4`` (two episodes), ``docs/img/agent_<task>_frames.png`` (six frames of
 the first half of one episode) and the cards of every shipped agent into ``docs/agents.md``.
@@ -84,8 +84,8 @@ def card_state(task: str, policy: Path, overrides: list[str], episodes: int) -> 
         rows = list(csv.DictReader(file))
     score = success_rate(policy, episodes, FRESH_SEED)
     print(f"[ship] {policy}: {episodes} fresh episodes (seeds {FRESH_SEED}+): success {score:.3f}")
-    suite = success_rate(policy, int(SUITE_CHECK["episodes"]), int(SUITE_CHECK["seed"]))
-    print(f"[ship] the test suite's {SUITE_CHECK['episodes']:.0f} episodes (seed {SUITE_CHECK['seed']:.0f}): {suite:.3f}")
+    suite = success_rate(policy, SUITE_CHECK.episodes, SUITE_CHECK.seed)
+    print(f"[ship] the test suite's {SUITE_CHECK.episodes} episodes (seed {SUITE_CHECK.seed}): {suite:.3f}")
     last = rows[-1]
     card = {
         "sampler": f"{saved['sampler']['_target_'].rsplit('.', 1)[1]}, HER '{saved['replay']['strategy']}'",
@@ -114,9 +114,9 @@ def ship(task: str, state: dict, force: bool) -> None:
     if score < bar and not force:
         sys.exit(f"[ship] {score:.3f} is below the {task} bar of {bar}: not shipped (--force ships it anyway)")
     suite = state["card"]["suite_check"]
-    if suite < SUITE_CHECK["success"] and not force:
-        sys.exit(f"[ship] {suite:.3f} over the test suite's {SUITE_CHECK['episodes']:.0f} episodes (seed "
-                 f"{SUITE_CHECK['seed']:.0f}) is below its {SUITE_CHECK['success']}: not shipped, the suite would fail")
+    if suite < SUITE_CHECK.success and not force:
+        sys.exit(f"[ship] {suite:.3f} over the test suite's {SUITE_CHECK.episodes} episodes (seed {SUITE_CHECK.seed}) "
+                 f"is below its {SUITE_CHECK.success}: not shipped, the suite would fail")
     path = SHIPPED_AGENTS[task]
     path.parent.mkdir(parents=True, exist_ok=True)
     save_policy(state, path)
