@@ -2,7 +2,10 @@
 
 For each stored-episode count it reports, per method, the median time to draw a batch of 256 with
 'future' HER relabelling (future_p 0.8), to draw when one episode was written since the last draw
-(what a training loop sees: samplers with caches pay for them here), and to write one 50-step episode.
+(what a training loop sees: samplers with caches pay for them here), and to write one 50-step episode. Each write
+is also timed in turns with a write of TorchRL's own ``HERReplayBuffer``, each first in every other turn, so that a
+shared machine's load drift falls on both alike; the last table divides by that. MEP is timed twice: as built, and
+refitted once after the fill (``ours_mep_fitted``), whose writes rank the whole buffer as in training.
 
     .venv/bin/python benchmarks/sampling.py --episodes 2000 20000 --repeats 200
 """
@@ -20,8 +23,8 @@ from dataclasses import dataclass
 import torch
 
 from _peers import (
-    BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, elapsed_ms, episodes_to_tensordict,
-    make_episodes, our_samplers, require_stable_baselines3, sparse_reward,
+    BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, build_torchrl_her, elapsed_ms,
+    episodes_to_tensordict, make_episodes, our_samplers, require_stable_baselines3, sparse_reward,
 )
 
 # Episodes the write timings cycle through; fresh data, never the stored episodes again.
@@ -36,14 +39,21 @@ class Timing:
     draw_ms: float
     draw_after_write_ms: float
     write_ms: float
+    write_in_turns_ms: float
+    torchrl_write_in_turns_ms: float
+
+    @property
+    def write_over_torchrl(self) -> float:
+        """This method's write over TorchRL's, the two timed in the same turns."""
+        return self.write_in_turns_ms / self.torchrl_write_in_turns_ms
 
 
 def writes_needed(repeats: int) -> int:
-    return WARMUP + 2 * repeats
+    return WARMUP + 3 * repeats
 
 
-def measure(draw: Draw, write: Write, repeats: int) -> Timing:
-    """Medians over ``repeats``; makes exactly ``writes_needed(repeats)`` writes."""
+def measure(draw: Draw, write: Write, repeats: int, torchrl_write: Write) -> Timing:
+    """Medians over ``repeats``; makes exactly ``writes_needed(repeats)`` writes, and ``repeats`` of ``torchrl_write``."""
     for _ in range(WARMUP):
         draw()
         write()
@@ -53,7 +63,12 @@ def measure(draw: Draw, write: Write, repeats: int) -> Timing:
         write()
         after_write.append(elapsed_ms(draw))
     writes = [elapsed_ms(write) for _ in range(repeats)]
-    return Timing(statistics.median(draws), statistics.median(after_write), statistics.median(writes))
+    in_turns: dict[Write, list[float]] = {write: [], torchrl_write: []}
+    for turn in range(repeats):
+        for timed in list(in_turns)[:: 1 if turn % 2 else -1]:
+            in_turns[timed].append(elapsed_ms(timed))
+    return Timing(statistics.median(draws), statistics.median(after_write), statistics.median(writes),
+                  statistics.median(in_turns[write]), statistics.median(in_turns[torchrl_write]))
 
 
 def _our_methods() -> dict[str, Builder]:
@@ -65,7 +80,7 @@ def _our_methods() -> dict[str, Builder]:
         print(f"note: our samplers are skipped, torchrl_cebp is not importable ({err})")
         return {}
 
-    def builder(name: str) -> Builder:
+    def builder(name: str, refit: bool = False) -> Builder:
         def build(stored: Episodes, pool: Episodes, n_writes: int) -> tuple[Draw, Write]:
             capacity = len(stored) * EPISODE_LENGTH
             cls_name, kwargs = our_samplers(capacity)[name]
@@ -76,6 +91,8 @@ def _our_methods() -> dict[str, Builder]:
                 batch_size=BATCH_SIZE,
             )
             rb.extend(episodes_to_tensordict(stored))
+            if refit:
+                rb.sampler.refit(rb.storage)
             fresh = itertools.cycle([episodes_to_tensordict(pool.slice(i, i + 1)) for i in range(len(pool))])
 
             def write() -> None:
@@ -89,12 +106,21 @@ def _our_methods() -> dict[str, Builder]:
     for name, (cls_name, _) in our_samplers(0).items():  # (the capacity only sizes PER's trees)
         if hasattr(samplers, cls_name):
             methods[f"ours_{name}"] = builder(name)
+            if name == "mep":
+                methods["ours_mep_fitted"] = builder(name, refit=True)
         else:
             print(f"note: ours_{name} is skipped, torchrl_cebp.replay.samplers has no {cls_name}")
     return methods
 
 
 def _table(title: str, results: dict[str, Timing], field: str) -> str:
+    if field == "write_in_turns_ms":
+        header = f"{'method':<20} {'median ms':>10} {'TorchRL ms':>11} {'/ TorchRL':>10}"
+        lines = [title, header, "-" * len(header)]
+        for name, timing in results.items():
+            lines.append(f"{name:<20} {timing.write_in_turns_ms:>10.3f} {timing.torchrl_write_in_turns_ms:>11.3f} "
+                         f"{timing.write_over_torchrl:>9.3g}x")
+        return "\n".join(lines)
     peers = [p for p in PEERS if p in results]
     header = f"{'method':<20} {'median ms':>10}" + "".join(f" {'/ ' + p:>16}" for p in peers)
     lines = [title, header, "-" * len(header)]
@@ -108,12 +134,14 @@ def _table(title: str, results: dict[str, Timing], field: str) -> str:
 def run(n_episodes: int, repeats: int, methods: dict[str, Builder]) -> dict[str, Timing]:
     data = make_episodes(n_episodes + POOL_EPISODES, seed=0)
     stored, pool = data.slice(0, n_episodes), data.slice(n_episodes, len(data))
+    # A second TorchRL buffer of its own, written in turns with each method's writes.
+    _, torchrl_write = build_torchrl_her(stored, pool, WARMUP + repeats * len(methods))
     results = {}
     for name, build in methods.items():
         start = time.perf_counter()
         draw, write = build(stored, pool, writes_needed(repeats))
         built_s = time.perf_counter() - start
-        results[name] = measure(draw, write, repeats)
+        results[name] = measure(draw, write, repeats, torchrl_write)
         print(f"  {name}: built in {built_s:.1f} s, {results[name]}", flush=True)
         # Drop the buffer before the next method so its memory and GC load do not bias the next timing.
         del draw, write
@@ -149,6 +177,7 @@ def main() -> None:
             ("draw a batch", "draw_ms"),
             ("draw a batch, one episode written since the last draw", "draw_after_write_ms"),
             ("write one episode", "write_ms"),
+            ("write one episode, in turns with a write of TorchRL's HERReplayBuffer", "write_in_turns_ms"),
         ):
             print("\n" + _table(f"{title} ({n} episodes)", results, field))
 
