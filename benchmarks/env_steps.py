@@ -26,6 +26,7 @@ import argparse
 import time
 from collections.abc import Callable
 
+import torchrl_cebp.envs  # noqa: F401, I001  (first: it keeps gymnasium-robotics' Adroit notice off the terminal)
 import gymnasium as gym
 import gymnasium_robotics
 import numpy as np

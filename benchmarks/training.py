@@ -36,6 +36,7 @@ import time
 from dataclasses import dataclass
 
 import tensordict  # noqa: F401, I001  (before mujoco: tensordict's triton import crashes once OSMesa is loaded)
+import torchrl_cebp.envs  # noqa: F401, I001  (before gymnasium-robotics: it keeps its Adroit notice off the terminal)
 import gymnasium as gym
 import gymnasium_robotics
 import numpy as np
