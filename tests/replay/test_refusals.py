@@ -1,6 +1,7 @@
 """What a user's pipeline could get wrong without a word: each is now read right or refused with the fix."""
 import copy
 import pickle
+import re
 from pathlib import Path
 
 import pytest
@@ -76,15 +77,32 @@ def test_a_write_lacking_a_stored_entry_is_refused_and_stores_nothing():
     assert len(rb) == 2 * T
 
 
-def test_a_write_whose_entries_change_shape_is_refused_and_stores_nothing():
+def _feature_moved_to_the_goal(episodes):
+    # The same floats a step, which the blocks would shift.
+    episodes["desired_goal"] = torch.cat([episodes["desired_goal"], episodes["observation"][..., -1:]], -1)
+    episodes["observation"] = episodes["observation"][..., :-1]
+    return "entry 'observation' has torch.float32 values of shape [24] per step, but the storage holds torch.float32 of [25]"
+
+
+def _action_as_a_matrix(episodes):
+    # The same width, which the blocks would store as the flat action.
+    episodes["action"] = episodes["action"].reshape(*episodes.shape, 2, 2)
+    return "entry 'action' has torch.float32 values of shape [2, 2] per step, but the storage holds torch.float32 of [4]"
+
+
+def _touch_in_double(episodes):
+    # TorchRL's storage refuses it; the block would cast it.
+    episodes["next", "touch"] = episodes["next", "touch"].double()
+    return "entry ('next', 'touch') has torch.float64 values of shape [2] per step, but the storage holds torch.float32"
+
+
+@pytest.mark.parametrize("change", [_feature_moved_to_the_goal, _action_as_a_matrix, _touch_in_double])
+def test_a_write_whose_entries_change_shape_or_dtype_is_refused_and_stores_nothing(change):
     rb = make_replay_buffer(CEBPSampler(), HindsightRelabel(sparse_reward), capacity=10 * T)
     rb.extend(make_episodes(2))
-    reshaped = make_episodes(2, seed=1)
-    # One feature moved from the observation to the goal: the same floats a step, which the blocks would shift.
-    reshaped["observation"] = reshaped["observation"][..., :-1]
-    reshaped["desired_goal"] = torch.cat([reshaped["desired_goal"], reshaped["desired_goal"][..., :1]], -1)
-    with pytest.raises(ValueError, match=r"entry 'observation' has 24 values per step, but the storage holds 25"):
-        rb.extend(reshaped)
+    changed = make_episodes(2, seed=1)
+    with pytest.raises(ValueError, match=re.escape(change(changed))):
+        rb.extend(changed)
     assert len(rb) == 2 * T and rb.write_count == 2
     rb.extend(make_episodes(1, seed=2))  # into row 2: the refused write left the cursor where it was
     assert torch.equal(rb.storage.get(torch.tensor([2]))["observation"], make_episodes(1, seed=2)["observation"])
@@ -149,3 +167,21 @@ def test_ddpg_her_refuses_no_frames_with_a_message(capsys):
     with pytest.raises(SystemExit) as done:
         example.main(["--total-frames", "0"])
     assert done.value.code == 2 and "--total-frames=0: must be a positive integer" in capsys.readouterr().err
+
+
+def test_a_write_of_more_episodes_than_rows_keeps_the_lengths_of_the_episodes_that_land():
+    def ending(after_steps):  # episodes that end early where given, else whole
+        episodes = make_episodes(len(after_steps), seed=len(after_steps))
+        for row, steps in enumerate(after_steps):
+            if steps is not None:
+                episodes["next", "done"][row] = False
+                episodes["next", "done"][row, steps - 1] = True
+        return episodes
+
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(2 * T), sampler=CEBPSampler(), dim_extend=0, batch_size=4000)
+    rb.extend(ending([4, None]))
+    rb.extend(ending([None, 4, None]))  # rows 0, 1, 0: row 0 whole, row 1 ends after 4 steps
+    assert rb.storage.valid_lengths(torch.arange(2)).tolist() == [T, 4]
+    assert rb.storage.common_length() is None
+    index = rb.sample()["index"]
+    assert not ((index[:, 0] == 1) & (index[:, 1] >= 4)).any()  # no padding step drawn

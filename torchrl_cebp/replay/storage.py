@@ -95,9 +95,9 @@ class _EpisodeRows:
         row_length = self._steps
         if not int(self._short_rows) and bool((lengths == row_length).all()):
             return  # whole episodes over whole ones: nothing changes (the usual write)
-        now, before = lengths < row_length, self._lengths[rows] < row_length
-        self._short_rows += torch.count_nonzero(now) - torch.count_nonzero(before)
         self._lengths[rows] = lengths
+        # Counted again, not by difference: a write of more episodes than rows repeats rows, and only its last lands.
+        self._short_rows.copy_(torch.count_nonzero(self._lengths < row_length))
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if not isinstance(data, TensorDictBase):
@@ -246,7 +246,8 @@ class _Layout(NamedTuple):
 
     source: TensorDictBase
     blocks: list[tuple[torch.Tensor, list[int]]]  # per dtype: ``[rows * T, width]`` and its entries' widths
-    row_blocks: list[tuple[torch.Tensor, list[NestedKey]]]  # per dtype: ``[rows, T, width]``, its keys as items() has
+    row_blocks: list[tuple[torch.Tensor, list[NestedKey], list[torch.Size]]]  # per dtype: ``[rows, T, width]``, its
+    # keys as items() has them, and their per-step shapes
     plan: list[tuple]  # how the gathered columns nest (_read_plan)
     n_nodes: int
     row_length: int  # TorchRL's storage.shape recomputes the filled rows on every read (~10% of a draw of 256)
@@ -318,13 +319,17 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             return
         layout = self._layout()
         # One pass over the entries costs a third of a get each; no reshape of entries already [n, T, width].
-        rows, shape, entries = [], (*data.shape, -1), dict(data.items(True, True))
-        for (block, keys), (_, widths) in zip(layout.row_blocks, layout.blocks):
-            parts = [value if value.ndim == 3 else value.reshape(shape) for value in map(entries.__getitem__, keys)]
-            if [part.shape[-1] for part in parts] != widths:  # else entries of other widths but the same sum shift
-                key, got, width = next((k, p.shape[-1], w) for k, p, w in zip(keys, parts, widths) if p.shape[-1] != w)
-                raise ValueError(f"entry {key!r} has {got} values per step, but the storage holds {width}: a write "
-                                 "keeps each entry's shape")
+        rows, entries = [], dict(data.items(True, True))
+        for block, keys, shapes in layout.row_blocks:
+            values = list(map(entries.__getitem__, keys))
+            if [value.shape[2:] for value in values] != shapes or any(value.dtype != block.dtype for value in values):
+                # TorchRL's storage refuses these too; the block's copy would reshape or cast them without a word.
+                key, value, shape = next((k, v, s) for k, v, s in zip(keys, values, shapes)
+                                         if v.shape[2:] != s or v.dtype != block.dtype)
+                raise ValueError(f"entry {key!r} has {value.dtype} values of shape {list(value.shape[2:])} per step, "
+                                 f"but the storage holds {block.dtype} of {list(shape)}: a write keeps each entry's "
+                                 "shape and dtype")
+            parts = [value if value.ndim == 3 else value.reshape(*data.shape, -1) for value in values]
             rows.append((block, parts[0] if len(parts) == 1 else torch.cat(parts, dim=-1)))
         _upstream.record_write(self, cursor, data, set_cursor)
         for block, values in rows:
@@ -364,8 +369,8 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             self._laid_out = _Layout(
                 packed, [(block.flatten(0, 1), [f.stop - f.start for f in fields if f.dtype == dtype])
                          for dtype, block in blocks.items()],
-                [(block, [f.path[0] if len(f.path) == 1 else f.path for f in fields if f.dtype == dtype])
-                 for dtype, block in blocks.items()],
+                [(block, [f.path[0] if len(f.path) == 1 else f.path for f in fields if f.dtype == dtype],
+                  [f.shape for f in fields if f.dtype == dtype]) for dtype, block in blocks.items()],
                 *_read_plan(fields), steps)
         return self._laid_out
 
@@ -383,7 +388,7 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             _, blocks, row_blocks, plan, n_nodes, steps = self._layout()
             first, stop, _ = index.indices(self.shape[0])
             stop = max(stop, first)
-            columns = [c for (block, _), (_, widths) in zip(row_blocks, blocks)
+            columns = [c for (block, _, _), (_, widths) in zip(row_blocks, blocks)
                        for c in block[first:stop].split_with_sizes(widths, -1)]
             return self._assembled(columns, plan, n_nodes, torch.Size([stop - first, steps]))
         return super().get(index)
