@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import torch
 from tensordict import TensorDict
-from torchrl.data import RandomSampler, TensorDictReplayBuffer
+from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
 from tests.modules import load_module
 from tests.replay.conftest import PUSH_WORKSPACE, T, make_episodes, sparse_reward
@@ -185,3 +185,15 @@ def test_a_write_of_more_episodes_than_rows_keeps_the_lengths_of_the_episodes_th
     assert rb.storage.common_length() is None
     index = rb.sample()["index"]
     assert not ((index[:, 0] == 1) & (index[:, 1] >= 4)).any()  # no padding step drawn
+
+
+def test_a_pair_read_takes_each_step_within_its_row_as_torchrl_storage_does():
+    episodes = make_episodes(3)
+    ours, theirs = EpisodeStorage(4 * T), LazyTensorStorage(4 * T, ndim=2)
+    for storage in (ours, theirs):
+        TensorDictReplayBuffer(storage=storage, dim_extend=0).extend(episodes)
+    rows, steps = torch.tensor([1, 2, 0]), torch.tensor([-1, 0, -T])
+    assert torch.equal(ours.get((rows, steps))["observation"], theirs.get((rows, steps))["observation"])
+    for outside in (T, -T - 1):
+        with pytest.raises(IndexError, match=f"step {outside} is outside rows of {T}"):
+            ours.get((rows, torch.tensor([0, outside, 1])))

@@ -377,7 +377,11 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
     def get(self, index: Any) -> Any:
         if self.initialized and _is_pair_index(index):
             _, blocks, _, plan, n_nodes, row_length = self._layout()
-            flat = torch.add(index[1], index[0], alpha=row_length)
+            low, high = torch.aminmax(index[1]) if index[1].numel() else (0, 0)
+            if low < -row_length or high >= row_length:  # the flat read below would take a neighbouring row's step
+                raise IndexError(f"step {int(high if high >= row_length else low)} is outside rows of {row_length}")
+            steps = index[1] if low >= 0 else index[1] % row_length  # a negative step counts from the end, as TorchRL's
+            flat = torch.add(steps, index[0], alpha=row_length)
             # One gather per dtype block; one split cuts out all of its entries (a slice each costs twice), called
             # as split_with_sizes: Tensor.split's Python wrapper costs as much again.
             columns = [c for block, widths in blocks for c in block.index_select(0, flat).split_with_sizes(widths, 1)]
