@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from tensordict import TensorDict
+from tensordict import NonTensorData, TensorDict
 from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
 from tests.modules import load_module
@@ -197,3 +197,22 @@ def test_a_pair_read_takes_each_step_within_its_row_as_torchrl_storage_does():
     for outside in (T, -T - 1):
         with pytest.raises(IndexError, match=f"step {outside} is outside rows of {T}"):
             ours.get((rows, torch.tensor([0, outside, 1])))
+
+
+def test_a_write_with_an_entry_the_first_did_not_hold_is_refused_and_stores_nothing():
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(4 * T), dim_extend=0, batch_size=4)
+    rb.extend(make_episodes(2))
+    extended = make_episodes(1, seed=1)
+    extended["next", "info"] = torch.ones(1, T, 2)  # a draw, which reads the blocks, would never return it
+    with pytest.raises(KeyError, match=re.escape("[('next', 'info')] are new")):
+        rb.extend(extended)
+    assert len(rb) == 2 * T
+
+
+def test_a_first_write_holding_a_non_tensor_entry_is_refused_naming_it():
+    episodes = make_episodes(2)
+    episodes["task"] = NonTensorData("push", batch_size=episodes.shape)  # the blocks would drop it
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(4 * T), dim_extend=0, batch_size=4)
+    with pytest.raises(TypeError, match=re.escape("exclude ['task'] before writing")):
+        rb.extend(episodes)
+    assert len(rb) == 0

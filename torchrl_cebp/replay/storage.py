@@ -7,7 +7,7 @@ from multiprocessing.context import get_spawning_popen
 from typing import Any, NamedTuple
 
 import torch
-from tensordict import TensorDict, TensorDictBase
+from tensordict import TensorDict, TensorDictBase, is_non_tensor
 from tensordict.utils import NestedKey
 from torchrl.data import LazyMemmapStorage, LazyTensorStorage
 
@@ -143,6 +143,8 @@ class _EpisodeRows:
             )
         require_time_at(data, 1, lambda: [buffer.dim_extend for buffer in _upstream.attached_buffers(self)])
         exact = self.initialized and self._check_keys(data)
+        if not self.initialized and (objects := [k for k in data.keys(True) if is_non_tensor(data.get(k))]):
+            raise TypeError(f"an episode storage keeps tensors only: exclude {sorted(map(str, objects))} before writing")
         ends = end_flags(data, self.end_key)
         counts = None if ends is None else ends.sum(-1)
         if counts is not None and counts.numel() and int(counts.max()) > 1:
@@ -170,6 +172,9 @@ class _EpisodeRows:
         for path, names in self._stored_keys[1].items():
             present = _names_at(data, path)
             exact, complete = exact and present == names, complete and names - {"index"} <= present
+            if not present - {"index"} <= names:  # a draw reads the blocks, laid out for the first write's entries
+                raise KeyError(f"a write into an episode storage holds the entries of its first write, no more: "
+                               f"{sorted((*path, name) for name in present - names - {'index'})} are new")
         if complete:
             return exact
         stored_keys = [key for key in stored.keys(True, True) if key != "index"]
