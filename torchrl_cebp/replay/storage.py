@@ -137,53 +137,44 @@ class _EpisodeRows:
         """Refuses a write whose rows cannot each be one episode of the storage's length; returns whether it holds
         exactly the stored entries, and its episodes' valid lengths."""
         if data.ndim != 2:
-            raise ValueError(
-                f"episode storages take whole episodes shaped [n_episodes, T], got batch shape {list(data.shape)}: "
-                f"{ASSEMBLE_FRAMES}"
-            )
+            raise ValueError(f"episode storages take whole episodes shaped [n_episodes, T], got batch shape "
+                             f"{list(data.shape)}: {ASSEMBLE_FRAMES}")
         require_time_at(data, 1, lambda: [buffer.dim_extend for buffer in _upstream.attached_buffers(self)])
         exact = self.initialized and self._check_keys(data)
         if not self.initialized and (objects := [k for k in data.keys(True) if is_non_tensor(data.get(k))]):
-            raise TypeError(f"an episode storage keeps tensors only: exclude {sorted(map(str, objects))} before writing")
+            raise TypeError(f"an episode storage keeps tensors only: exclude {sorted(map(str, objects))} before "
+                            "writing")
         ends = end_flags(data, self.end_key)
         counts = None if ends is None else ends.sum(-1)
         if counts is not None and counts.numel() and int(counts.max()) > 1:
             crowded = int(counts.argmax())
-            raise ValueError(
-                f"row {crowded} of the batch of shape {list(data.shape)} holds {int(counts[crowded])} episode "
-                f"ends ({self.end_key!r} flags), but a row is one episode: {ASSEMBLE_FRAMES}"
-            )
+            raise ValueError(f"row {crowded} of the batch of shape {list(data.shape)} holds {int(counts[crowded])} "
+                             f"episode ends ({self.end_key!r} flags), but a row is one episode: {ASSEMBLE_FRAMES}")
         if self.initialized and data.shape[1] != self._steps:
-            raise ValueError(
-                f"episodes of {data.shape[1]} steps cannot go into a storage of {self._steps}-step episodes"
-            )
+            raise ValueError(f"episodes of {data.shape[1]} steps cannot go into a storage of {self._steps}-step "
+                             "episodes")
         lengths = torch.full(data.shape[:1], data.shape[1], dtype=torch.long) if ends is None else lengths_of_ends(ends)
         return exact, lengths
 
     def _check_keys(self, data: TensorDictBase) -> bool:
-        """Refuses a write that lacks a stored entry (its rows would keep the entry's old memory); returns whether
-        it holds exactly the stored entries."""
+        """Refuses a write that lacks a stored entry (its rows would keep the entry's old memory) or holds a new one (a
+        draw reads the blocks laid out for the first write's entries); returns whether it holds exactly those."""
         stored = _upstream.stored_tensordict(self)
         if self._stored_keys is None or self._stored_keys[0] is not stored:
             self._stored_keys = stored, _names_by_node(stored.keys(True, True))
         # Each node's names (no nested iteration: it costs more than the write); "index": TorchRL's writers add the
         # index they write to, to some writes only.
-        exact = complete = True
+        exact, missing, new = True, [], []
         for path, names in self._stored_keys[1].items():
             present = _names_at(data, path)
-            exact, complete = exact and present == names, complete and names - {"index"} <= present
-            if not present - {"index"} <= names:  # a draw reads the blocks, laid out for the first write's entries
-                raise KeyError(f"a write into an episode storage holds the entries of its first write, no more: "
-                               f"{sorted((*path, name) for name in present - names - {'index'})} are new")
-        if complete:
-            return exact
-        stored_keys = [key for key in stored.keys(True, True) if key != "index"]
-        missing = [key for key in stored_keys if data.get(key, None) is None]
-        if missing:
-            raise KeyError(
-                f"a write into an episode storage must hold every stored entry: it lacks {sorted(map(str, missing))}"
-            )
-        return False
+            if present != names:
+                exact = False
+                missing += [(*path, name) for name in names - present - {"index"}]
+                new += [(*path, name) for name in present - names - {"index"}]
+        if missing or new:
+            raise KeyError(f"a write into an episode storage must hold every stored entry and no other: it lacks "
+                           f"{sorted(missing)} and adds {sorted(new)}")
+        return exact
 
     def state_dict(self) -> dict[str, Any]:
         """The storage's state with its filled rows only, so that a checkpoint grows with the stored episodes."""
@@ -238,11 +229,9 @@ class _EpisodeRows:
         ``max_size``); refuses one of another number of rows: TorchRL would fail on the copy, or adopt its size."""
         own_rows = episode_rows(self.max_size, row_length)
         if rows != own_rows:
-            raise ValueError(
-                f"the saved buffer holds {rows} episodes of {row_length} steps (capacity {rows * row_length} "
-                f"transitions), this one {own_rows} (capacity {self.max_size}): build the buffer with "
-                f"capacity={rows * row_length} to load it"
-            )
+            raise ValueError(f"the saved buffer holds {rows} episodes of {row_length} steps (capacity "
+                             f"{rows * row_length} transitions), this one {own_rows} (capacity {self.max_size}): "
+                             f"build the buffer with capacity={rows * row_length} to load it")
         self.max_size = rows * row_length
 
 
