@@ -162,15 +162,16 @@ class _EpisodeRows:
         stored = _upstream.stored_tensordict(self)
         if self._stored_keys is None or self._stored_keys[0] is not stored:
             self._stored_keys = stored, _names_by_node(stored.keys(True, True))
-        # Each node's names (no nested iteration: it costs more than the write); "index": TorchRL's writers add the
-        # index they write to, to some writes only.
+        # Each node's names (no nested iteration: it costs more than the write). TorchRL's writers add "index" to some
+        # writes only, and its collectors add their "collector" ids to those after the first (they share only an
+        # initialised storage): neither is drawn.
         exact, missing, new = True, [], []
         for path, names in self._stored_keys[1].items():
             present = _names_at(data, path)
             if present != names:
                 exact = False
                 missing += [(*path, name) for name in names - present - {"index"}]
-                new += [(*path, name) for name in present - names - {"index"}]
+                new += [(*path, name) for name in present - names - {"index", "collector"}]
         if missing or new:
             raise KeyError(f"a write into an episode storage must hold every stored entry and no other: it lacks "
                            f"{sorted(missing)} and adds {sorted(new)}")
