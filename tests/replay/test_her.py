@@ -178,6 +178,25 @@ def test_a_buffer_given_her_only_as_sample_unit_fails_loudly():
         rb.sample()
 
 
+def test_indexing_the_buffer_reads_the_stored_transitions_unrelabelled():
+    her = HindsightRelabel(sparse_reward, future_p=1.0)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(10 * T), dim_extend=0, batch_size=8, sample_unit=her,
+                                collate_fn=her.collate)
+    rb.extend(labelled_episodes(3))
+    stored, rows, steps = rb.storage.get(slice(None)), torch.tensor([0, 2]), torch.tensor([3, 7])
+    assert (rb[0:2] == stored[0:2]).all() and (rb[rows] == stored[rows]).all()
+    assert (rb[(rows, steps)] == stored[rows, steps]).all()
+    assert rb.sample()["her_relabelled"].all()  # a draw still relabels
+
+
+def test_a_buffer_given_her_only_as_collate_fn_fails_loudly():
+    her = HindsightRelabel(sparse_reward)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(10 * T), dim_extend=0, batch_size=8, collate_fn=her.collate)
+    rb.extend(labelled_episodes(2))
+    with pytest.raises(RuntimeError, match=r"batch of shape \[8\] without a draw.*sample_unit=her"):
+        rb.sample()
+
+
 def pickled(rb):
     return pickle.loads(pickle.dumps(rb))
 

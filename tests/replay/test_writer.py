@@ -70,7 +70,10 @@ def test_collector_frames_become_whole_episodes_across_batches(num_envs, frames_
     assert_each_trajectory_stored_whole(rb, batches_)
 
 
-@pytest.mark.parametrize("collector_class", [MultiSyncCollector, MultiAsyncCollector])
+# cat_results=0 yields one flat [frames] batch: the envs' frames one after another, told apart by trajectory id.
+@pytest.mark.parametrize("collector_class", [MultiSyncCollector, MultiAsyncCollector,
+                                             functools.partial(MultiSyncCollector, cat_results=0)],
+                         ids=["sync", "async", "sync-flat"])
 def test_env_processes_fill_one_prioritised_buffer_that_the_learner_extends(collector_class):
     # The supported way to collect in other processes: they yield frames, and the process that draws extends the
     # buffer, so that its sampler scores every episode. Their episodes run across batches and interleave.

@@ -128,8 +128,7 @@ class HindsightRelabel(SampleUnit):
 
         The goal is ``(*next, achieved_goal_key)[e, j]``, state ``j + 1``: "future" draws ``j`` in ``[t, L - 1]``.
         """
-        if lengths is None:
-            lengths = episode_lengths(episodes, self.end_key, rows)
+        lengths = episode_lengths(episodes, self.end_key, rows) if lengths is None else lengths
         relabel = torch.rand(steps.shape, generator=generator) < self.future_p
         last = lengths - 1
         if self.strategy == "past":
@@ -183,11 +182,13 @@ class HindsightRelabel(SampleUnit):
 
         ``data`` already holds each transition's stored goal and achieved goal: no second read of the storage.
         """
+        if data.ndim > 1:  # rb[index] reads stored [episode, t] rows, not relabelled; a draw reads [B] transitions
+            return data
         draw = getattr(self._pending, "draw", None)
         if draw is None:
             raise RuntimeError(
-                "HindsightRelabel.collate ran without a draw: give the buffer the same instance as "
-                "sample_unit too"
+                f"HindsightRelabel.collate got a batch of shape {list(data.shape)} without a draw of its own: give the "
+                "buffer the same instance as sample_unit too, as in TensorDictReplayBuffer(sample_unit=her, ...)"
             )
         self._pending.draw = None
         self._collated = True
@@ -201,9 +202,7 @@ class HindsightRelabel(SampleUnit):
     # A thread-local cannot be pickled; a pending draw belongs to the thread between a buffer's expand and its
     # collate, so a copy (deepcopy, pickle, a collector's worker) starts with none.
     def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        del state["_pending"]
-        return state
+        return {key: value for key, value in self.__dict__.items() if key != "_pending"}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)

@@ -18,13 +18,14 @@ PARTIAL_EPISODES_FILE = "partial_episodes.pt"
 class EpisodeWriter(TensorDictRoundRobinWriter):
     """Writes the episodes a batch of frames completes as ``[episode, t]`` rows; the rest waits for its end.
 
-    Every leading dimension of a batch is an env lane and the last one is time (the layout of TorchRL's collectors
-    and ``rollout``, which name it ``"time"``); the buffer must extend along dimension 0 (``dim_extend=0``). Each lane
-    is cut after each ``end_key`` flag; an episode that ends is padded to ``max_episode_steps`` and written
-    round-robin. Frames continue the episode of their ``traj_key`` (else of their lane) only if their first state is
-    its last next-state, so an episode cut by a reset is dropped, never merged. ``rb.extend(batch)`` returns each
-    frame's flat transition index ``row * max_episode_steps + step``, -1 while its episode has not ended; and
-    ``rb.empty()`` drops the waiting frames too. See ``docs/replay.md`` for the layouts it takes.
+    Every leading dimension of a batch is an env lane and the last one is time (the layout of TorchRL's collectors and
+    ``rollout``, which name it ``"time"``); the buffer must extend along dimension 0 (``dim_extend=0``). Each lane is
+    cut after each ``end_key`` flag and where its ``traj_key`` changes (a flat batch may hold several envs' frames in
+    turn: only their ids tell them apart); an episode that ends is padded to ``max_episode_steps`` and written
+    round-robin. Frames continue the episode of their ``traj_key`` (else of their lane) only if their first state is its
+    last next-state, so an episode cut by a reset is dropped, never merged. ``rb.extend(batch)`` returns each frame's
+    flat transition index ``row * max_episode_steps + step``, -1 while its episode has not ended; and ``rb.empty()``
+    drops the waiting frames too. See ``docs/replay.md`` for the layouts it takes.
 
     Args:
         max_episode_steps (int): the storage's row length, the longest episode (``env.max_episode_steps``).
@@ -73,12 +74,13 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
     def _extend(self, data: TensorDictBase) -> torch.Tensor:
         lanes, ends = self._lanes(data)
         trajectories = lanes.get(self.traj_key, None)
+        # A flat batch may hold several env lanes one after another: only their trajectory ids tell them apart.
+        cuts = ends.clone() if trajectories is None else ends | (trajectories != trajectories.roll(-1, 1))
+        cuts[:, -1] = True  # a lane's last piece either ends there or waits for the next batch
         episodes, pieces = [], []  # pieces[i]: episodes[i]'s lane, first step, last step + 1, steps before it
         for lane in range(lanes.shape[0]):
-            start = 0
-            for stop in [*(ends[lane].nonzero().squeeze(-1) + 1).tolist(), lanes.shape[1]]:
-                if stop == start:
-                    continue
+            stops = (cuts[lane].nonzero().squeeze(-1) + 1).tolist()
+            for start, stop in zip([0, *stops], stops):
                 key = lane if trajectories is None else int(trajectories[lane, start])
                 before = self._partial.pop(key, None)
                 segment = lanes[lane, start:stop]
@@ -96,7 +98,6 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
                     episodes.append(pad(episode, [0, self.max_episode_steps - episode.shape[0]]))
                 else:  # a copy: a collector may reuse its batch's memory for the next one
                     self._partial[key] = episode.clone()
-                start = stop
         positions = torch.full(lanes.shape, -1, dtype=torch.long)
         if episodes:
             rows = super().extend(torch.stack(episodes))[:: self.max_episode_steps, 0]
@@ -145,9 +146,8 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
         return {key: frames.apply(torch.clone).state_dict() for key, frames in self._partial.items()}
 
     def _load_partial_state(self, state: dict[int, dict[str, Any]]) -> None:
-        self._partial = {
-            key: TensorDict().load_state_dict(frames, strict=False).apply(torch.clone) for key, frames in state.items()
-        }
+        self._partial = {key: TensorDict().load_state_dict(frames, strict=False).apply(torch.clone)
+                         for key, frames in state.items()}
 
     def __repr__(self) -> str:
         cursor = int(_upstream.writer_position(self)[0])
@@ -158,8 +158,7 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
 def _continues(before: TensorDictBase, segment: TensorDictBase) -> bool:
     """Whether ``segment`` starts where ``before`` stopped: its first state is ``before``'s last next-state."""
     last, first = before[-1].get("next"), segment[0]
-    present = set(first.keys(True, True))
-    return all(torch.equal(value, first.get(key)) for key, value in last.items(True, True) if key in present)
+    return all(torch.equal(value, first.get(key, value)) for key, value in last.items(True, True))
 
 
 def _require_time_last(lanes: TensorDictBase, ends: torch.Tensor, shape: torch.Size) -> None:
