@@ -1,4 +1,7 @@
 """Baselines' per-worker replay: routing, per-worker draws and IS weights, equivalence for uniform HER, state."""
+import copy
+import pickle
+
 import numpy as np
 import pytest
 import torch
@@ -180,6 +183,61 @@ def test_a_per_shard_smaller_than_its_workers_rows_is_refused():
     rb = TensorDictReplayBuffer(storage=EpisodeStorage(40 * T), sampler=sampler, dim_extend=0, batch_size=4)
     with pytest.raises(ValueError, match="worker 0's PERSampler holds 500 transitions, but the worker owns 1000"):
         rb.extend(make_episodes(2))
+
+
+
+def test_a_storage_with_fewer_rows_than_a_write_deals_out_is_refused_with_the_capacity_it_needs():
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(7 * T), sampler=initial_cebp_workers(), dim_extend=0, batch_size=8)
+    with pytest.raises(ValueError, match=rf"4 workers of episodes_per_worker=2 take {CYCLE} episode rows a write, but "
+                                         rf"the storage has 7: give it a capacity of at least {CYCLE * T} transitions"):
+        rb.extend(make_episodes(CYCLE))
+
+
+@pytest.mark.parametrize("make_shard", [UniformEpisodeSampler, lambda: PERSampler(4 * T)], ids=["uniform", "per"])
+def test_a_per_worker_sampler_reused_over_a_second_storage_is_refused_unless_given_its_state(make_shard):
+    sampler = PerWorkerSampler(make_shard(), make_shard())
+    first, second = (TensorDictReplayBuffer(storage=EpisodeStorage(8 * T), sampler=sampler, dim_extend=0, batch_size=8)
+                     for _ in range(2))
+    first.extend(make_episodes(4))
+    first.sample()
+    with pytest.raises(ValueError, match="rows of another storage, not of this EpisodeStorage: use one sampler per buffer"):
+        second.extend(make_episodes(2, seed=1))
+    second.load_state_dict(first.state_dict())  # restored from a state, it takes the storage it meets
+    assert set(second.sample()["index"][:, 0].tolist()) <= set(range(4))
+
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_per_worker_buffer_scores_the_writes_into_its_own_storage(how):
+    sampler = PerWorkerSampler(ScoredByValue(), ScoredByValue())
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(6 * T), sampler=sampler, dim_extend=0, batch_size=4)
+    rb.extend(valued(1, 2))
+    rb.sample()
+    copied = copy.deepcopy(rb) if how == "deepcopy" else pickle.loads(pickle.dumps(rb))
+    copied.extend(valued(3, 4))
+    copied.sample()
+    assert [shard.state_dict()["priorities"][:2].tolist() for shard in copied.sampler.samplers] == [[1, 3], [2, 4]]
+    assert sampler.n_episodes == 2
+
+def test_the_per_worker_beta_schedule_is_one_scheduler_whose_step_states_and_copies_keep():
+    def build():
+        rb = make_replay_buffer(per_workers(4 * CYCLE * T), HindsightRelabel(sparse_reward), capacity=4 * CYCLE * T)
+        rb.extend(make_episodes(CYCLE))
+        return rb
+
+    original, restored = build(), build()
+    held = restored.sampler.beta_scheduler()  # as the trainer holds it, from before the restore
+    for _ in range(4):
+        original.sampler.beta_scheduler().step()
+    restored.load_state_dict(original.state_dict())
+    copies = [restored, copy.deepcopy(original), pickle.loads(pickle.dumps(original))]
+    for rb in [original, *copies]:
+        for _ in range(3):
+            rb.sampler.beta_scheduler().step()
+        rb.sample()  # every worker draws with the schedule's beta
+    assert restored.sampler.beta_scheduler() is held
+    betas = [shard.beta for rb in [original, *copies] for shard in rb.sampler.samplers]
+    assert betas == pytest.approx([0.4 + 0.6 * 7 / 10] * 4 * WORKERS)
 
 
 def test_mep_refits_each_worker_on_its_own_episodes():

@@ -1,6 +1,7 @@
 """Each sampler's episode frequencies and weights against the formulas, computed by hand."""
 import copy
 import functools
+import pickle
 import re
 from pathlib import Path
 
@@ -224,6 +225,32 @@ def test_ebp_frequencies(either_storage):
     increase = np.concatenate([energy[:, :1], np.diff(energy, axis=1)], 1)
     trajectory = np.clip(increase, 0, 0.5).sum(1)
     assert_frequencies(counts(rb), trajectory ** (1 / 1.01) + np.finfo(np.float32).eps)
+
+
+
+@pytest.mark.parametrize("name", ["cebp", "cebp_released", "cebp_initial", "ebp"])
+def test_non_finite_padding_steps_leave_the_priority_unchanged(name):
+    sampler, episodes = SAMPLERS[name](4 * T), _ending_at([31, 31, T, 31], seed=0)
+    valid = valid_steps(episode_lengths(episodes), T)
+    padded = episodes.clone()
+    for key in (("next", "touch"), ("next", "achieved_goal"), ("next", "observation")):
+        padded[key][0, 31:], padded[key][1, 31:], padded[key][3, 31:] = float("nan"), float("inf"), -float("inf")
+    expected = sampler.episode_priority(episodes, valid)
+    assert torch.equal(sampler.episode_priority(padded, valid), expected)
+
+
+def test_cper_refuses_a_non_finite_touch_in_a_valid_step_and_ignores_one_in_the_padding():
+    episodes = hand_made(2)
+    episodes["next", "done"][1, 30:] = False
+    episodes["next", "done"][1, 30] = True
+    clean = CPERSampler().episode_priority(episodes, valid_steps(episode_lengths(episodes), T))
+    episodes["next", "touch"][1, 40:] = float("nan")  # padding
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(4 * T), sampler=CPERSampler(), dim_extend=0, batch_size=64)
+    rb.extend(episodes)
+    assert torch.equal(rb.sampler.priorities()[:2], clean)
+    episodes["next", "touch"][1, 7, 0] = float("nan")
+    with pytest.raises(ValueError, match=r"touch \('next', 'touch'\) is \[nan\] at the \(episode, step\) \[\[1, 7\]\]"):
+        rb.extend(episodes)
 
 
 def mep_probabilities(scores):
@@ -546,6 +573,37 @@ def test_a_new_sampler_scores_the_episodes_its_storage_already_holds(name, first
     assert new.sampler.n_episodes == seen.sampler.n_episodes
     torch.testing.assert_close(new.sampler.state_dict()["priorities"], seen.sampler.state_dict()["priorities"])
 
+
+
+@pytest.mark.parametrize("storage", [EpisodeStorage, functools.partial(LazyTensorStorage, ndim=2)],
+                         ids=["an episode storage", "TorchRL's storage"])
+@pytest.mark.parametrize("name", EPISODE_SAMPLERS)
+def test_a_sampler_reused_in_a_second_buffer_is_refused_unless_given_its_state(name, storage):
+    def buffer_of(sampler):
+        return TensorDictReplayBuffer(storage=storage(50 * T), sampler=sampler, dim_extend=0, batch_size=64)
+
+    first = buffer_of(SAMPLERS[name](50 * T))
+    first.extend(hand_made(N_EPISODES))
+    first.sample()
+    second = buffer_of(first.sampler)  # same capacity: the first buffer's priorities would fit its rows
+    with pytest.raises(ValueError, match="scores the episodes of another storage, not of this .*: use one sampler per buffer"):
+        second.extend(hand_made(2, seed=1))
+    second.load_state_dict(first.state_dict())  # restored from a state, it takes the storage it meets
+    assert set(second.sample()["index"][:, 0].tolist()) <= set(range(N_EPISODES)) and second.sampler.n_episodes == 6
+    with pytest.raises(ValueError, match="use one sampler per buffer"):
+        first.sample()
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_buffer_scores_and_draws_the_writes_into_its_own_storage(how):
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(8 * T), sampler=ScoredByValue(), dim_extend=0, batch_size=256)
+    rb.extend(valued(1, 1))
+    rb.sample()
+    copied = copy.deepcopy(rb) if how == "deepcopy" else pickle.loads(pickle.dumps(rb))
+    copied.extend(valued(0, 0, 5))
+    assert copied.sampler.state_dict()["priorities"][:5].tolist() == [1, 1, 0, 0, 5]
+    assert set(copied.sample()["index"][:, 0].tolist()) == {0, 1, 4}
+    assert rb.sampler.n_episodes == 2
 
 def _extend_reporting_errors(rb, errors):
     try:

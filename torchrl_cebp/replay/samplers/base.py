@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import abc
 import math
+import weakref
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -37,16 +38,12 @@ def load_state(sampler: Sampler, path: str | Path) -> None:
     sampler.load_state_dict(torch.load(Path(path) / SAMPLER_STATE_FILE, weights_only=True))
 
 
-def require_key(
-    episodes: TensorDictBase, key: NestedKey, trailing_shape: tuple[int | None, ...]
-) -> torch.Tensor:
+def require_key(episodes: TensorDictBase, key: NestedKey, trailing_shape: tuple[int | None, ...]) -> torch.Tensor:
     """``episodes[key]``, refused unless it is there with shape ``[n, T, *trailing_shape]`` (``None``: any size)."""
     value = episodes.get(key, None)
     if value is None:
-        raise KeyError(
-            f"episode data has no key {key!r} (expected shape {_shape_text(trailing_shape)}); "
-            f"present keys: {sorted(map(str, episodes.keys(True, True)))}"
-        )
+        raise KeyError(f"episode data has no key {key!r} (expected shape {_shape_text(trailing_shape)}); "
+                       f"present keys: {sorted(map(str, episodes.keys(True, True)))}")
     if value.ndim != 2 + len(trailing_shape) or value.shape[2:] != trailing_shape and any(  # zip() only for wildcards
         want is not None and got != want for got, want in zip(value.shape[2:], trailing_shape)
     ):
@@ -82,9 +79,7 @@ def batch_normalised_weights(probabilities: torch.Tensor, n_episodes: int, beta:
     return weights.div_(weights.max())
 
 
-def episode_positions(
-    episodes: TensorDictBase, position_key: NestedKey, next_position_key: NestedKey
-) -> torch.Tensor:
+def episode_positions(episodes: TensorDictBase, position_key: NestedKey, next_position_key: NestedKey) -> torch.Tensor:
     """The float64 ``[n, T + 1, 3]`` positions: the one before step 0, then each next position."""
     first = require_key(episodes, position_key, (3,))[:, :1]
     following = require_key(episodes, next_position_key, (3,))
@@ -172,6 +167,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         self._n_stored = 0
         self._seen: torch.Tensor | None = None  # the storage's write counts as last scored (-1: to score)
         self._writes: torch.Tensor | None = None  # the write counts of a storage that keeps none
+        self._scored_storage: weakref.ref | None = None  # None: a new, restored or copied sampler takes the next one
 
     # ---- what subclasses define -------------------------------------------------
     @abc.abstractmethod
@@ -211,17 +207,14 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
             self._tree = SumSegmentTreeFp64(n_rows)
             self._priorities = torch.zeros(n_rows, dtype=torch.float64)
         elif self._tree.size != n_rows:
-            raise ValueError(
-                f"{type(self).__name__} holds priorities for {self._tree.size} episode rows (of another buffer, "
-                f"or loaded from the state of one), but this storage has {n_rows}: use one sampler per buffer"
-            )
+            raise ValueError(f"{type(self).__name__} holds priorities for {self._tree.size} episode rows (of another "
+                             f"buffer, or loaded from the state of one), but this storage has {n_rows}: use one "
+                             "sampler per buffer")
 
     def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
         if storage is None:
-            raise RuntimeError(
-                f"{type(self).__name__} computes priorities from the written episodes and "
-                "needs the storage: use it inside a replay buffer whose writer notifies it."
-            )
+            raise RuntimeError(f"{type(self).__name__} computes priorities from the written episodes and "
+                               "needs the storage: use it inside a replay buffer whose writer notifies it.")
         rows, counts = stored_rows(index), self._write_counts(storage)
         if counts is self._writes:
             counts[rows] += 1
@@ -230,14 +223,17 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     def _write_counts(self, storage: Storage) -> torch.Tensor:
         """Each row's write count, then of write starts and ends: the storage's, or this sampler's if it keeps none."""
+        if self._scored_storage is None:
+            self._scored_storage = weakref.ref(storage)
+        elif self._scored_storage() is not storage:  # its rows are another storage's: their scores would be wrong here
+            raise ValueError(f"{type(self).__name__} scores the episodes of another storage, not of this "
+                             f"{type(storage).__name__}: use one sampler per buffer (a new one, or one given a state)")
         counts = getattr(storage, "write_counts", None)
         if counts is not None:
             return counts
         if getattr(storage, "ndim", 1) != 2:
-            raise ValueError(
-                f"{type(self).__name__} needs an episode storage with ndim=2 "
-                f"(rows = episodes, columns = steps), got ndim={getattr(storage, 'ndim', 1)}"
-            )
+            raise ValueError(f"{type(self).__name__} needs an episode storage with ndim=2 "
+                             f"(rows = episodes, columns = steps), got ndim={getattr(storage, 'ndim', 1)}")
         n_rows = storage.max_size // storage.shape[1]
         if self._writes is None or self._writes.numel() != n_rows + 1:
             self._writes = torch.zeros(n_rows + 1, dtype=torch.long)
@@ -252,7 +248,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         counts = self._write_counts(storage)
         if self._seen is None or self._seen.numel() != counts.numel():
             # First meeting: every filled row is new. Restored from a state: the state holds all but the rows
-            # written since. Another storage is refused unless its rows are as many.
+            # written since. A storage of another size is refused.
             stale = slice(0, storage.shape[0]) if self._tree is None else written
             self._make_tree(storage)
             self._seen = counts.clone()
@@ -291,10 +287,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         # One pass for both bounds: a NaN makes both NaN, which fails the first comparison.
         low, high = torch.aminmax(priority) if priority.numel() else (0.0, 0.0)
         if priority.shape != rows.shape or not (float(low) >= 0.0 and float(high) < math.inf):
-            raise ValueError(
-                f"{type(self).__name__}.episode_priority must give {rows.numel()} finite "
-                f"non-negative priorities, got {priority}"
-            )
+            raise ValueError(f"{type(self).__name__}.episode_priority must give {rows.numel()} finite "
+                             f"non-negative priorities, got {priority}")
         self.set_priorities(rows, priority)
         steps = self.step_weights(episodes, valid)
         if steps is not None:
@@ -375,7 +369,11 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         if priorities.numel():
             self._tree = SumSegmentTreeFp64(priorities.numel())
             self._tree[torch.arange(priorities.numel())] = priorities
-        self._seen = None  # the state matches the storage's rows as they are now
+        self._seen = self._scored_storage = None  # the state matches the rows of the storage it meets next
+
+    def __getstate__(self) -> dict[str, Any]:
+        # A weakref neither pickles nor copies: the copy takes the storage it meets first, its buffer's copy.
+        return {**super().__getstate__(), "_scored_storage": None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         # Torch sends every tensor as shared memory: each process scores into its own, and shares only the write

@@ -43,14 +43,14 @@ class _ContactEnergySampler(EpisodePrioritySampler):
             keys[self.next_observation_key] = (None,)
         return keys
 
-    def _touch(self, episodes: TensorDictBase) -> torch.Tensor:
-        """Left + right touch per step, ``[n, T]``; every form multiplies it by the displacement, 0 on padding."""
-        return require_key(episodes, self.touch_key, (2,)).sum(-1, dtype=torch.float64)
+    def _touch(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Left + right touch per valid step (0 on padding, whatever it holds: NaN * 0 is NaN), ``[n, T]``."""
+        return require_key(episodes, self.touch_key, (2,)).sum(-1, dtype=torch.float64).where(valid, 0.0)
 
     def _displacement(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         """The object's displacement over each valid step (0 on padding), ``[n, T, 3]``."""
         positions = episode_positions(episodes, self.position_key, self.next_position_key)
-        return positions.diff(dim=1) * valid.unsqueeze(-1)
+        return positions.diff(dim=1).where(valid.unsqueeze(-1), 0.0)
 
     def _in_workspace(self, episodes: TensorDictBase) -> torch.Tensor:
         """Whether the gripper is inside the workspace box after each step (always, without a box), ``[n, T]``."""
@@ -115,7 +115,7 @@ class CEBPSampler(_ContactEnergySampler):
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
-        energy = torch.cumsum(self._touch(episodes) * distance, dim=1)
+        energy = torch.cumsum(self._touch(episodes, valid) * distance, dim=1)
         return (self.scale * torch.sigmoid(self.temperature * energy) * valid).sum(1)
 
     def __repr__(self) -> str:
@@ -157,7 +157,7 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         displacement = self._displacement(episodes, valid)
-        energy = torch.cumsum(displacement.sum(-1) * self._touch(episodes), dim=1)  # summed over xyz first: commutes
+        energy = torch.cumsum(displacement.sum(-1) * self._touch(episodes, valid), dim=1)  # xyz summed first: commutes
         x = energy * self._in_workspace(episodes) * torch.linalg.vector_norm(displacement, dim=-1)
         centred = 100.0 * torch.sigmoid(self.k * x) - 50.0
         return centred.abs().sum(1) + FLOAT32_EPS
@@ -194,7 +194,7 @@ class InitialCEBPSampler(_ContactEnergySampler):
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
-        touch = self._touch(episodes) * self._in_workspace(episodes)
+        touch = self._touch(episodes, valid) * self._in_workspace(episodes)
         return (touch * distance).abs().sum(1) + FLOAT32_EPS
 
     def __repr__(self) -> str:

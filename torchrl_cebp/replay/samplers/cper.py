@@ -45,6 +45,11 @@ class CPERSampler(EpisodePrioritySampler):
 
     def step_weights(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         touch = require_key(episodes, self.touch_key, (2,)).sum(-1, dtype=torch.float64)
+        unreadable = valid & ~touch.isfinite()  # NaN never passes the threshold: every later step would weigh 1
+        if unreadable.any():
+            raise ValueError(f"CPERSampler: touch {self.touch_key!r} is {touch[unreadable].tolist()} at the (episode, "
+                             f"step) {unreadable.nonzero().tolist()} of the write: drop the episodes, valid steps need "
+                             "finite touch")
         rich = torch.cumsum(touch, dim=1) > self.threshold
         return torch.where(rich, self.lam, 1.0) * valid
 

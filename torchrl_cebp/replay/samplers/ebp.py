@@ -61,7 +61,7 @@ class EBPSampler(EpisodePrioritySampler):
         velocity = positions.diff(dim=1) / STEP_SECONDS
         energy = self.w_potential * GRAVITY * MASS * height + self.w_kinetic * 0.5 * MASS * velocity.pow(2).sum(-1)
         increase = torch.cat([energy[:, :1], energy.diff(dim=1)], dim=1)
-        trajectory_energy = (increase.clamp(0.0, self.clip_energy) * valid).sum(1)
+        trajectory_energy = increase.clamp(0.0, self.clip_energy).where(valid, 0.0).sum(1)  # padding's NaN * 0 is NaN
         # eps keeps a buffer of motionless episodes drawable (uniformly) instead of all-zero.
         return trajectory_energy.pow(1.0 / (self.temperature + 0.01)) + FLOAT32_EPS
 

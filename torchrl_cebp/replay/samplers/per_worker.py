@@ -229,16 +229,24 @@ class PerWorkerSampler(Sampler):
         """Each worker's rows of ``storage``, as the storages its sampler sees."""
         if self._views and self._views[0].storage is storage:
             return self._views
+        if self._views:  # its workers' samplers hold the priorities of the other storage's rows
+            raise ValueError(f"PerWorkerSampler deals out the rows of another storage, not of this "
+                             f"{type(storage).__name__}: use one sampler per buffer (a new one, or one given a state)")
         ndim = getattr(storage, "ndim", 1)
         if ndim != 2:
             raise ValueError(f"PerWorkerSampler needs an episode storage with ndim=2, got ndim={ndim}")
+        layout, row_length = self.layout, storage.shape[1]
+        if storage.max_size // row_length < layout.cycle:  # a write deals out whole cycles: one must fit
+            raise ValueError(f"PerWorkerSampler's {layout.workers} workers of episodes_per_worker="
+                             f"{layout.episodes_per_worker} take {layout.cycle} episode rows a write, but the storage "
+                             f"has {storage.max_size // row_length}: give it a capacity of at least "
+                             f"{layout.cycle * row_length} transitions")
         views = [WorkerRows(storage, worker, self.layout) for worker in range(self.layout.workers)]
         for view, sampler in zip(views, self.samplers):
             if getattr(sampler, "max_size", view.max_size) < view.max_size:  # a sampler sized by capacity (PER)
-                raise ValueError(
-                    f"worker {view.worker}'s {type(sampler).__name__} holds {sampler.max_size} transitions, but the "
-                    f"worker owns {view.max_size} of the storage's {storage.max_size}"
-                )
+                raise ValueError(f"worker {view.worker}'s {type(sampler).__name__} holds {sampler.max_size} "
+                                 f"transitions, but the worker owns {view.max_size} of the storage's "
+                                 f"{storage.max_size}")
         self._views = views
         return views
 
@@ -266,10 +274,8 @@ class PerWorkerSampler(Sampler):
 
     def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
         if storage is None:
-            raise RuntimeError(
-                "PerWorkerSampler routes each written episode to its worker's sampler and needs the storage: "
-                "use it inside a replay buffer whose writer notifies it."
-            )
+            raise RuntimeError("PerWorkerSampler routes each written episode to its worker's sampler and needs the "
+                               "storage: use it inside a replay buffer whose writer notifies it.")
         views = self.worker_views(storage)
         self._require_whole_cycles(stored_rows(index).numel())  # for a storage that runs no check_episodes
         for worker, _, local in self._by_worker(index):
@@ -286,11 +292,10 @@ class PerWorkerSampler(Sampler):
 
     def _require_whole_cycles(self, n_episodes: int) -> None:
         if n_episodes % self.layout.cycle:
-            raise ValueError(
-                f"PerWorkerSampler deals the episodes of each write to {self.layout.workers} workers, "
-                f"{self.layout.episodes_per_worker} each in turn: write a multiple of {self.layout.cycle} episodes "
-                f"at a time (one per env), got {n_episodes}; other counts would mix the envs' lanes across workers"
-            )
+            raise ValueError(f"PerWorkerSampler deals the episodes of each write to {self.layout.workers} workers, "
+                             f"{self.layout.episodes_per_worker} each in turn: write a multiple of {self.layout.cycle} "
+                             f"episodes at a time (one per env), got {n_episodes}; other counts would mix the envs' "
+                             "lanes across workers")
 
     def update_priority(self, index: Any, priority: float | torch.Tensor, *, storage: Storage | None = None) -> None:
         priority = torch.as_tensor(priority)
@@ -302,17 +307,13 @@ class PerWorkerSampler(Sampler):
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple[torch.Tensor, torch.Tensor], dict]:
         workers = self.layout.workers
         if batch_size % workers:
-            raise ValueError(
-                f"PerWorkerSampler draws batch_size // workers from each worker: batch_size={batch_size} must be "
-                f"a multiple of workers={workers}"
-            )
+            raise ValueError(f"PerWorkerSampler draws batch_size // workers from each worker: batch_size={batch_size} "
+                             f"must be a multiple of workers={workers}")
         views = self.worker_views(storage)
         # The last worker owns the fewest of the filled rows: if it has one, every worker has.
         if not self.layout.rows_of_worker(storage.shape[0], workers - 1):
-            raise RuntimeError(
-                f"PerWorkerSampler: a worker holds no episodes yet: write {self.layout.cycle} "
-                f"episodes at a time, {self.layout.episodes_per_worker} per worker"
-            )
+            raise RuntimeError(f"PerWorkerSampler: a worker holds no episodes yet: write {self.layout.cycle} "
+                               f"episodes at a time, {self.layout.episodes_per_worker} per worker")
         draws = [sampler.sample(view, batch_size // workers) for view, sampler in zip(views, self.samplers)]
         rows, steps = zip(*(split_index(index) for index, _ in draws))
         weights = [torch.as_tensor(info["priority_weight"]) for _, info in draws if "priority_weight" in info]
@@ -326,12 +327,11 @@ class PerWorkerSampler(Sampler):
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         saved, layout = WorkerLayout(state_dict["workers"], state_dict["episodes_per_worker"]), self.layout
         if saved != layout:
-            raise ValueError(
-                f"the saved replay has {saved.workers} workers of {saved.episodes_per_worker} episodes per cycle; "
-                f"this PerWorkerSampler has {layout.workers} of {layout.episodes_per_worker}"
-            )
+            raise ValueError(f"the saved replay has {saved.workers} workers of {saved.episodes_per_worker} episodes "
+                             f"per cycle; this PerWorkerSampler has {layout.workers} of {layout.episodes_per_worker}")
         for sampler, state in zip(self.samplers, state_dict["shards"]):
             sampler.load_state_dict(state)
+        self._views = []  # as its workers' samplers, it takes the next storage it meets
 
     def _empty(self) -> None:
         for sampler in self.samplers:
@@ -339,6 +339,10 @@ class PerWorkerSampler(Sampler):
 
     dumps = dump_state
     loads = load_state
+
+    def __getstate__(self) -> dict[str, Any]:
+        # Not PrioritizedSampler's, which refuses copies. A copy views the storage it meets: TorchRL copies no view.
+        return {**Sampler.__getstate__(self), "_views": []}
 
     def __repr__(self) -> str:
         return (f"PerWorkerSampler(workers={self.layout.workers}, "
@@ -415,10 +419,12 @@ class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
             sampler.beta = value
 
     def beta_scheduler(self) -> LinearScheduler:
-        """One TorchRL linear schedule of every worker's beta, to the workers' ``beta_end`` in ``beta_anneal_draws``."""
+        """Worker 0's TorchRL linear schedule of beta, whose step its state keeps; every worker draws with its beta."""
         first = self.samplers[0]
-        if not hasattr(first, "beta_end"):
+        if not hasattr(first, "beta_scheduler"):
             raise TypeError(f"the workers' {type(first).__name__} has no beta schedule: PERSampler has one")
-        return LinearScheduler(self, "beta", final_value=first.beta_end, num_steps=first.beta_anneal_draws)
+        return first.beta_scheduler()
 
-    __getstate__ = Sampler.__getstate__  # PrioritizedSampler's refuses every copy; the workers' PERs say why
+    def sample(self, storage: Storage, batch_size: int) -> tuple[tuple[torch.Tensor, torch.Tensor], dict]:
+        self.beta = self.samplers[0].beta  # the schedule steps worker 0's
+        return super().sample(storage, batch_size)
