@@ -55,12 +55,11 @@ class EpisodeReplayBuffer(TensorDictReplayBuffer):
             if after % 2 and after != running:  # a write runs: timed from its first sight
                 running, since = after, time.monotonic()
             elif after % 2 and time.monotonic() - since > self.write_timeout_s:
-                raise RuntimeError(
-                    f"the storage's write count total stayed odd ({after}) for over {self.write_timeout_s} s of "
-                    "redraws: a write into it never finished, a writing process probably died mid-write, and the "
-                    "rows it wrote may be torn. The count stays so in this storage: to recover, build a new storage "
-                    "and buffer and load them from a checkpoint (load_state_dict), or refill them."
-                )
+                raise RuntimeError(f"the storage's write count total stayed odd ({after}) for over "
+                                   f"{self.write_timeout_s} s of redraws: a write into it never finished, a writing "
+                                   "process probably died mid-write, and the rows it wrote may be torn. The count "
+                                   "stays so in this storage: to recover, build a new storage and buffer and load "
+                                   "them from a checkpoint (load_state_dict), or refill them.")
 
 
 def make_replay_buffer(

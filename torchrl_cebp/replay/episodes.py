@@ -104,10 +104,8 @@ def require_time_at(
             cause = transposed_by_buffer
         else:
             cause = laid_out
-        raise ValueError(
-            f"the batch of shape {list(data.shape)} has its 'time' dimension at {names.index('time')}, not {dim}: "
-            f"{cause}"
-        )
+        raise ValueError(f"the batch of shape {list(data.shape)} has its 'time' dimension at {names.index('time')}, "
+                         f"not {dim}: {cause}")
 
 
 def valid_steps(lengths: torch.Tensor, row_length: int) -> torch.Tensor:

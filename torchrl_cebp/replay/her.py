@@ -186,10 +186,9 @@ class HindsightRelabel(SampleUnit):
             return data
         draw = getattr(self._pending, "draw", None)
         if draw is None:
-            raise RuntimeError(
-                f"HindsightRelabel.collate got a batch of shape {list(data.shape)} without a draw of its own: give the "
-                "buffer the same instance as sample_unit too, as in TensorDictReplayBuffer(sample_unit=her, ...)"
-            )
+            raise RuntimeError(f"HindsightRelabel.collate got a batch of shape {list(data.shape)} without a draw of "
+                               "its own: give the buffer the same instance as sample_unit too, as in "
+                               "TensorDictReplayBuffer(sample_unit=her, ...)")
         self._pending.draw = None
         self._collated = True
         entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key))

@@ -88,11 +88,10 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
                     before = None  # the env was reset before that episode ended: it never will
                 episode = segment if before is None else torch.cat([before, segment])
                 if episode.shape[0] > self.max_episode_steps:
-                    raise ValueError(
-                        f"an episode of the batch of shape {list(data.shape)} runs {episode.shape[0]} steps without "
-                        f"an end flag {self.end_key!r}, more than max_episode_steps={self.max_episode_steps}: give "
-                        "EpisodeWriter the env's episode length, and a batch whose last dimension is time"
-                    )
+                    raise ValueError(f"an episode of the batch of shape {list(data.shape)} runs {episode.shape[0]} "
+                                     f"steps without an end flag {self.end_key!r}, more than max_episode_steps="
+                                     f"{self.max_episode_steps}: give EpisodeWriter the env's episode length, and a "
+                                     "batch whose last dimension is time")
                 if bool(ends[lane, stop - 1]):
                     pieces.append((lane, start, stop, 0 if before is None else before.shape[0]))
                     episodes.append(pad(episode, [0, self.max_episode_steps - episode.shape[0]]))
@@ -114,10 +113,8 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
         lanes = data.unsqueeze(0) if data.ndim == 1 else data.reshape(-1, data.shape[-1])
         ends = lanes.get(self.end_key, None)
         if ends is None:
-            raise KeyError(
-                f"EpisodeWriter cuts episodes at {self.end_key!r}, which the batch lacks; "
-                f"present keys: {sorted(map(str, lanes.keys(True, True)))}"
-            )
+            raise KeyError(f"EpisodeWriter cuts episodes at {self.end_key!r}, which the batch lacks; present keys: "
+                           f"{sorted(map(str, lanes.keys(True, True)))}")
         ends = ends.reshape(*lanes.shape, -1).any(-1)
         if "time" not in data.names and data.ndim > 1:
             _require_time_last(lanes, ends, data.shape)
@@ -174,10 +171,9 @@ def _require_time_last(lanes: TensorDictBase, ends: torch.Tensor, shape: torch.S
             continue
         matches = (now == before.get(key)).reshape(*following.shape, -1).all(-1)
         if (following & ~matches).any():
-            raise ValueError(
-                f"the frames of the batch of shape {list(shape)} do not follow each other along its last "
-                f"dimension ({key!r} differs from the previous frame's next {key!r}): EpisodeWriter reads the "
-                "last dimension as time. Give the batch time last ([envs, T], e.g. batch.transpose(0, 1)), or "
-                "name its dimensions as TorchRL's collectors do (names=[..., 'time'])"
-            )
+            raise ValueError(f"the frames of the batch of shape {list(shape)} do not follow each other along its "
+                             f"last dimension ({key!r} differs from the previous frame's next {key!r}): EpisodeWriter "
+                             "reads the last dimension as time. Give the batch time last ([envs, T], e.g. "
+                             "batch.transpose(0, 1)), or name its dimensions as TorchRL's collectors do (names=[..., "
+                             "'time'])")
         return  # one entry present in both tells

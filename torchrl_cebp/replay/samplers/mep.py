@@ -157,10 +157,8 @@ class MEPSampler(EpisodePrioritySampler):
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         if "scores" not in state_dict:
-            raise ValueError(
-                "this MEP state is from a version of MEPSampler that did not rank the whole buffer on every write; "
-                "it holds no per-episode scores to rank: start the run again"
-            )
+            raise ValueError("this MEP state is from a version of MEPSampler that did not rank the whole buffer on "
+                             "every write; it holds no per-episode scores to rank: start the run again")
         super().load_state_dict(state_dict)
         self._scores = state_dict["scores"].clone()
         self._lowest_fit_score = float(state_dict["lowest_fit_score"])

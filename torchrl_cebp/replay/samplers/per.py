@@ -76,11 +76,9 @@ class PERSampler(PrioritizedSampler):
             return
         row_length = storage.shape[1]
         if storage.max_size > self.max_size:  # TorchRL rounds a 2-D storage up to whole rows on its first write
-            raise ValueError(
-                f"the PERSampler holds {self.max_size} transitions, but its storage holds {storage.max_size} "
-                f"({storage.max_size // row_length} episodes of {row_length} steps, the capacity rounded up to whole "
-                f"episodes): build it with capacity={storage.max_size}"
-            )
+            raise ValueError(f"the PERSampler holds {self.max_size} transitions, but its storage holds "
+                             f"{storage.max_size} ({storage.max_size // row_length} episodes of {row_length} steps, "
+                             f"the capacity rounded up to whole episodes): build it with capacity={storage.max_size}")
         if shared_length(storage, self.end_key) == row_length:  # every stored episode whole: no padding to exclude
             return
         rows = stored_rows(index)
@@ -104,10 +102,8 @@ class PERSampler(PrioritizedSampler):
             state_dict = _upstream.prioritized_state_of(state_dict)
         saved_capacity = state_dict["sum_tree"].numel()
         if saved_capacity != self.max_size:
-            raise ValueError(
-                f"the saved PER state holds priorities for {saved_capacity} transitions, this PERSampler for "
-                f"{self.max_size}: build it with capacity={saved_capacity} to load it"
-            )
+            raise ValueError(f"the saved PER state holds priorities for {saved_capacity} transitions, this "
+                             f"PERSampler for {self.max_size}: build it with capacity={saved_capacity} to load it")
         _upstream.load_prioritized_state(self, state_dict)
         if scheduler_state is not None:
             self._beta_scheduler.load_state_dict(scheduler_state)
