@@ -372,9 +372,9 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
     def get(self, index: Any) -> Any:
         if self.initialized and _is_pair_index(index):
             _, blocks, _, plan, n_nodes, row_length = self._layout()
-            low, high = torch.aminmax(index[1]) if index[1].numel() else (0, 0)
+            low, high = map(int, torch.aminmax(index[1])) if index[1].numel() else (0, 0)  # ints: compared faster
             if low < -row_length or high >= row_length:  # the flat read below would take a neighbouring row's step
-                raise IndexError(f"step {int(high if high >= row_length else low)} is outside rows of {row_length}")
+                raise IndexError(f"step {high if high >= row_length else low} is outside rows of {row_length}")
             steps = index[1] if low >= 0 else index[1] % row_length  # a negative step counts from the end, as TorchRL's
             flat = torch.add(steps, index[0], alpha=row_length)
             # One gather per dtype block; one split cuts out all of its entries (a slice each costs twice), called
