@@ -72,7 +72,7 @@ def test_a_write_lacking_a_stored_entry_is_refused_and_stores_nothing():
     rb.extend(make_episodes(2))
     partial = make_episodes(2, seed=1)
     del partial["next", "touch"]
-    lacks_touch = "must hold every stored entry and no other: it lacks [('next', 'touch')] and adds []"
+    lacks_touch = "must hold every stored entry and no other: it lacks [('next', 'touch')]"
     with pytest.raises(KeyError, match=re.escape(lacks_touch)):
         rb.extend(partial)
     assert len(rb) == 2 * T
@@ -196,7 +196,7 @@ def test_a_pair_read_takes_each_step_within_its_row_as_torchrl_storage_does():
     rows, steps = torch.tensor([1, 2, 0]), torch.tensor([-1, 0, -T])
     assert torch.equal(ours.get((rows, steps))["observation"], theirs.get((rows, steps))["observation"])
     for outside in (T, -T - 1):
-        with pytest.raises(IndexError, match=f"step {outside} is outside rows of {T}"):
+        with pytest.raises(IndexError, match=f"step {outside} is outside rows of {T} steps"):
             ours.get((rows, torch.tensor([0, outside, 1])))
 
 
@@ -205,7 +205,7 @@ def test_a_write_with_an_entry_the_first_did_not_hold_is_refused_and_stores_noth
     rb.extend(make_episodes(2))
     extended = make_episodes(1, seed=1)
     extended["next", "info"] = torch.ones(1, T, 2)  # a draw, which reads the blocks, would never return it
-    with pytest.raises(KeyError, match=re.escape("it lacks [] and adds [('next', 'info')]")):
+    with pytest.raises(KeyError, match=re.escape("no other: it adds [('next', 'info')]")):
         rb.extend(extended)
     assert len(rb) == 2 * T
 
@@ -217,3 +217,16 @@ def test_a_first_write_holding_a_non_tensor_entry_is_refused_naming_it():
     with pytest.raises(TypeError, match=re.escape("exclude ['task'] before writing")):
         rb.extend(episodes)
     assert len(rb) == 0
+
+
+def test_a_write_with_collector_ids_after_the_first_gets_every_check_and_leaves_the_ids_out():
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(4 * T), dim_extend=0, batch_size=4)
+    rb.extend(make_episodes(2))  # as env.rollout writes before collectors share the storage
+    with_ids = make_episodes(1, seed=1)
+    with_ids["collector", "traj_ids"] = torch.zeros(1, T, dtype=torch.long)
+    with_ids["observation"] = with_ids["observation"].double()
+    with pytest.raises(ValueError, match=re.escape("entry 'observation' has torch.float64 values")):
+        rb.extend(with_ids)
+    with_ids["observation"] = with_ids["observation"].float()
+    rb.extend(with_ids)
+    assert len(rb) == 3 * T and "collector" not in rb.storage.get(slice(0, 3)).keys()

@@ -251,6 +251,9 @@ def test_cper_refuses_a_non_finite_touch_in_a_valid_step_and_ignores_one_in_the_
     episodes["next", "touch"][1, 7, 0] = float("nan")
     with pytest.raises(ValueError, match=r"touch \('next', 'touch'\) is \[nan\] at the \(episode, step\) \[\[1, 7\]\]"):
         rb.extend(episodes)
+    assert len(rb) == 2 * T  # refused before it was stored: the buffer draws on
+    rb.extend(hand_made(2, seed=1))
+    rb.sample()
 
 
 def mep_probabilities(scores):

@@ -126,16 +126,7 @@ def make_replay_buffer(
     return EpisodeReplayBuffer(
         storage=EpisodeStorage(capacity, device=device) if storage == "tensor" else
         EpisodeMemmapStorage(capacity, scratch_dir=scratch_dir, device=device),
-        sampler=sampler,
-        sample_unit=her,
-        collate_fn=her.collate,
-        transform=transform,
-        batch_size=batch_size,
-        dim_extend=0,
-        priority_key="td_error",
-        generator=generator,
-        writer=writer,
-        prefetch=prefetch,
-        pin_memory=pin_memory,
-        shared=shared,
+        sampler=sampler, sample_unit=her, collate_fn=her.collate, transform=transform, batch_size=batch_size,
+        dim_extend=0, priority_key="td_error",  # the TD-error entry the trainer's loss writes, which PER ranks by
+        generator=generator, writer=writer, prefetch=prefetch, pin_memory=pin_memory, shared=shared,
     )

@@ -156,11 +156,10 @@ class HindsightRelabel(SampleUnit):
             # known to call it, so that draw was interrupted (an error or Ctrl-C while the batch was read): drop it.
             self._pending.draw = None
             if not self._collated:
-                raise RuntimeError(
-                    "HindsightRelabel's previous draw was never written into its batch: give the buffer the same "
-                    "instance as collate_fn too, e.g. TensorDictReplayBuffer(sample_unit=her, collate_fn=her.collate, "
-                    "...). (If it has it, that first draw was interrupted before its batch was read; sample again.)"
-                )
+                raise RuntimeError("HindsightRelabel's previous draw was never written into its batch: give the "
+                                   "buffer the same instance as collate_fn too, e.g. TensorDictReplayBuffer("
+                                   "sample_unit=her, collate_fn=her.collate, ...). (If it has it, that first draw was "
+                                   "interrupted before its batch was read; sample again.)")
         rows, steps = split_index(index)
         generator = _upstream.buffer_generator(storage)
         lengths = shared_length(storage, self.end_key)

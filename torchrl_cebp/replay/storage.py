@@ -101,10 +101,10 @@ class _EpisodeRows:
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
         if not isinstance(data, TensorDictBase):
-            return self._store(cursor, data, set_cursor, exact=False)
+            return self._store(cursor, data, set_cursor, whole=False)
         known, counting = self._lengths is not None, False
         try:  # every check before any row changes (the store's of shapes too): a refused write stores nothing
-            exact, lengths = self._check_rows(data)
+            whole, lengths = self._check_rows(data)
             for buffer in _upstream.attached_buffers(self):
                 check = getattr(buffer.sampler, "check_episodes", None)
                 if check is not None:
@@ -114,7 +114,7 @@ class _EpisodeRows:
                     torch.arange(self.max_size // self._steps)[cursor].reshape(-1))
                 self._write_counts[-1].add_(1)  # odd while the rows change (add_: no copy back, as += makes)
                 counting = True
-            self._store(cursor, data, set_cursor, exact=exact)
+            self._store(cursor, data, set_cursor, whole=whole)
             if known:
                 self._set_lengths(rows, lengths)
         except Exception:
@@ -129,18 +129,18 @@ class _EpisodeRows:
             self._read_lengths_if_unknown()
             self._count_written(slice(0, self.shape[0]))
 
-    def _store(self, cursor: Any, data: Any, set_cursor: bool, *, exact: bool) -> None:
-        """Writes ``data`` at ``cursor`` (``exact``: it holds the stored entries, no more) as TorchRL's storage does."""
+    def _store(self, cursor: Any, data: Any, set_cursor: bool, *, whole: bool) -> None:
+        """Writes ``data`` at ``cursor`` (``whole``: it holds every stored entry) as TorchRL's storage does."""
         super().set(cursor, data, set_cursor=set_cursor)
 
     def _check_rows(self, data: TensorDictBase) -> tuple[bool, torch.Tensor]:
         """Refuses a write whose rows cannot each be one episode of the storage's length; returns whether it holds
-        exactly the stored entries, and its episodes' valid lengths."""
+        every stored entry, and its episodes' valid lengths."""
         if data.ndim != 2:
             raise ValueError(f"episode storages take whole episodes shaped [n_episodes, T], got batch shape "
                              f"{list(data.shape)}: {ASSEMBLE_FRAMES}")
         require_time_at(data, 1, lambda: [buffer.dim_extend for buffer in _upstream.attached_buffers(self)])
-        exact = self.initialized and self._check_keys(data)
+        whole = self.initialized and self._check_keys(data)
         if not self.initialized and (objects := [k for k in data.keys(True) if is_non_tensor(data.get(k))]):
             raise TypeError(f"an episode storage keeps tensors only: exclude {sorted(map(str, objects))} before "
                             "writing")
@@ -154,28 +154,29 @@ class _EpisodeRows:
             raise ValueError(f"episodes of {data.shape[1]} steps cannot go into a storage of {self._steps}-step "
                              "episodes")
         lengths = torch.full(data.shape[:1], data.shape[1], dtype=torch.long) if ends is None else lengths_of_ends(ends)
-        return exact, lengths
+        return whole, lengths
 
     def _check_keys(self, data: TensorDictBase) -> bool:
         """Refuses a write that lacks a stored entry (its rows would keep the entry's old memory) or holds a new one (a
-        draw reads the blocks laid out for the first write's entries); returns whether it holds exactly those."""
+        draw reads the blocks laid out for the first write's entries); returns whether it holds every stored one."""
         stored = _upstream.stored_tensordict(self)
         if self._stored_keys is None or self._stored_keys[0] is not stored:
             self._stored_keys = stored, _names_by_node(stored.keys(True, True))
         # Each node's names (no nested iteration: it costs more than the write). TorchRL's writers add "index" to some
         # writes only, and its collectors add their "collector" ids to those after the first (they share only an
-        # initialised storage): neither is drawn.
-        exact, missing, new = True, [], []
-        for path, names in self._stored_keys[1].items():
+        # initialised storage): a write may hold either without storing it.
+        nodes, whole, missing, new = self._stored_keys[1], True, [], []
+        for path, names in nodes.items():
             present = _names_at(data, path)
             if present != names:
-                exact = False
-                missing += [(*path, name) for name in names - present - {"index"}]
-                new += [(*path, name) for name in present - names - {"index", "collector"}]
+                whole = whole and names <= present
+                missing += [(*path, n) for n in names - present - {"index"} if (*path, n) not in nodes]
+                new += [(*path, n) for n in present - names - {"index", "collector"}]
         if missing or new:
-            raise KeyError(f"a write into an episode storage must hold every stored entry and no other: it lacks "
-                           f"{sorted(missing)} and adds {sorted(new)}")
-        return exact
+            problems = [f"lacks {sorted(missing)}"] * bool(missing) + [f"adds {sorted(new)}"] * bool(new)
+            raise KeyError(f"a write into an episode storage must hold every stored entry and no other: it "
+                           f"{' and '.join(problems)}")
+        return whole
 
     def state_dict(self) -> dict[str, Any]:
         """The storage's state with its filled rows only, so that a checkpoint grows with the stored episodes."""
@@ -241,8 +242,8 @@ class _Layout(NamedTuple):
 
     source: TensorDictBase
     blocks: list[tuple[torch.Tensor, list[int]]]  # per dtype: ``[rows * T, width]`` and its entries' widths
-    row_blocks: list[tuple[torch.Tensor, list[NestedKey], list[torch.Size]]]  # per dtype: ``[rows, T, width]``, its
-    # keys as items() has them, and their per-step shapes
+    # Per dtype: ``[rows, T, width]``, its keys as items() has them, and their per-step shapes.
+    row_blocks: list[tuple[torch.Tensor, list[NestedKey], list[torch.Size]]]
     plan: list[tuple]  # how the gathered columns nest (_read_plan)
     n_nodes: int
     row_length: int  # TorchRL's storage.shape recomputes the filled rows on every read (~10% of a draw of 256)
@@ -303,12 +304,12 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         if self.initialized:  # the blocks too: laid out in one process only, the other would write elsewhere
             self._layout()
 
-    def _store(self, cursor: Any, data: Any, set_cursor: bool, *, exact: bool) -> None:
-        # Whole rows of the stored entries, no more and no fewer: one copy per dtype block, where TorchRL's write
-        # copies each entry apart (the most of a write's time). Laid out at the first write, not the first draw, so
+    def _store(self, cursor: Any, data: Any, set_cursor: bool, *, whole: bool) -> None:
+        # Whole rows of the stored entries, no other: one copy per dtype block, where TorchRL's write copies each
+        # entry apart (the most of a write's time). Laid out at the first write, not the first draw, so
         # that a process the storage is sent to writes into the same blocks.
-        if not (exact and isinstance(cursor, torch.Tensor) and cursor.ndim == 1 and type(data) is TensorDict):
-            super()._store(cursor, data, set_cursor, exact=exact)
+        if not (whole and isinstance(cursor, torch.Tensor) and cursor.ndim == 1 and type(data) is TensorDict):
+            super()._store(cursor, data, set_cursor, whole=whole)
             if isinstance(data, TensorDictBase):
                 self._layout()
             return
@@ -374,7 +375,7 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
             _, blocks, _, plan, n_nodes, row_length = self._layout()
             low, high = map(int, torch.aminmax(index[1])) if index[1].numel() else (0, 0)  # ints: compared faster
             if low < -row_length or high >= row_length:  # the flat read below would take a neighbouring row's step
-                raise IndexError(f"step {high if high >= row_length else low} is outside rows of {row_length}")
+                raise IndexError(f"step {high if high >= row_length else low} is outside rows of {row_length} steps")
             steps = index[1] if low >= 0 else index[1] % row_length  # a negative step counts from the end, as TorchRL's
             flat = torch.add(steps, index[0], alpha=row_length)
             # One gather per dtype block; one split cuts out all of its entries (a slice each costs twice), called

@@ -275,9 +275,8 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         episodes = storage.get(slice(first, last + 1)) if last - first + 1 == rows.numel() else storage.get(rows)
         self.write_priorities(rows, episodes, stored_lengths(storage, rows, self.end_key))
 
-    def write_priorities(
-        self, rows: torch.Tensor, episodes: TensorDictBase, lengths: torch.Tensor | None = None
-    ) -> None:
+    def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase,
+                         lengths: torch.Tensor | None = None) -> None:
         """Scores the ``[n, T]`` ``episodes`` stored at ``rows`` (their valid ``lengths`` read from their flags if
         not given)."""
         if lengths is None:

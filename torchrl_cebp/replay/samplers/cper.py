@@ -5,6 +5,7 @@ import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 
+from torchrl_cebp.replay.episodes import episode_lengths, valid_steps
 from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, checked, require_key
 
 
@@ -43,14 +44,21 @@ class CPERSampler(EpisodePrioritySampler):
     def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
         return {self.touch_key: (2,)}
 
-    def step_weights(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+    def check_episodes(self, episodes: TensorDictBase) -> None:
+        """Refuses episodes whose valid steps' touch is not finite, before an episode storage stores them."""
+        super().check_episodes(episodes)
+        self._touch(episodes, valid_steps(episode_lengths(episodes, self.end_key), episodes.shape[1]))
+
+    def _touch(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
         touch = require_key(episodes, self.touch_key, (2,)).sum(-1, dtype=torch.float64)
         unreadable = valid & ~touch.isfinite()  # NaN never passes the threshold: every later step would weigh 1
         if unreadable.any():
             raise ValueError(f"CPERSampler: touch {self.touch_key!r} is {touch[unreadable].tolist()} at the (episode, "
-                             f"step) {unreadable.nonzero().tolist()} of the write: drop the episodes, valid steps need "
-                             "finite touch")
-        rich = torch.cumsum(touch, dim=1) > self.threshold
+                             f"step) {unreadable.nonzero().tolist()}: its step weights need finite touch")
+        return touch
+
+    def step_weights(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        rich = torch.cumsum(self._touch(episodes, valid), dim=1) > self.threshold
         return torch.where(rich, self.lam, 1.0) * valid
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:

@@ -98,9 +98,8 @@ class MEPSampler(EpisodePrioritySampler):
         # Rank 0's, every episode's until the first refit; after it, write_priorities ranks the buffer again.
         return self._rank_priorities(torch.zeros(episodes.shape[0], dtype=torch.long))
 
-    def write_priorities(
-        self, rows: torch.Tensor, episodes: TensorDictBase, lengths: torch.Tensor | None = None
-    ) -> None:
+    def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase,
+                         lengths: torch.Tensor | None = None) -> None:
         if lengths is None:
             lengths = episode_lengths(episodes, self.end_key)
         n_before = self.n_episodes
