@@ -242,8 +242,8 @@ class _Layout(NamedTuple):
 
     source: TensorDictBase
     blocks: list[tuple[torch.Tensor, list[int]]]  # per dtype: ``[rows * T, width]`` and its entries' widths
-    # Per dtype: ``[rows, T, width]``, its keys as items() has them, and their per-step shapes.
-    row_blocks: list[tuple[torch.Tensor, list[NestedKey], list[torch.Size]]]
+    # Per dtype: ``[rows, T, width]``, its keys as items() has them, and their per-step shapes and dtype.
+    row_blocks: list[tuple[torch.Tensor, list[NestedKey], list[tuple[torch.Size, torch.dtype]]]]
     plan: list[tuple]  # how the gathered columns nest (_read_plan)
     n_nodes: int
     row_length: int  # TorchRL's storage.shape recomputes the filled rows on every read (~10% of a draw of 256)
@@ -316,12 +316,12 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         layout = self._layout()
         # One pass over the entries costs a third of a get each; no reshape of entries already [n, T, width].
         rows, entries = [], dict(data.items(True, True))
-        for block, keys, shapes in layout.row_blocks:
+        for block, keys, kinds in layout.row_blocks:
             values = list(map(entries.__getitem__, keys))
-            if [value.shape[2:] for value in values] != shapes or any(value.dtype != block.dtype for value in values):
+            if [(value.shape[2:], value.dtype) for value in values] != kinds:
                 # TorchRL's storage refuses these too; the block's copy would reshape or cast them without a word.
-                key, value, shape = next((k, v, s) for k, v, s in zip(keys, values, shapes)
-                                         if v.shape[2:] != s or v.dtype != block.dtype)
+                key, value, (shape, _) = next((k, v, kind) for k, v, kind in zip(keys, values, kinds)
+                                              if (v.shape[2:], v.dtype) != kind)
                 raise ValueError(f"entry {key!r} has {value.dtype} values of shape {list(value.shape[2:])} per step, "
                                  f"but the storage holds {block.dtype} of {list(shape)}: a write keeps each entry's "
                                  "shape and dtype")
@@ -366,7 +366,7 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
                 packed, [(block.flatten(0, 1), [f.stop - f.start for f in fields if f.dtype == dtype])
                          for dtype, block in blocks.items()],
                 [(block, [f.path[0] if len(f.path) == 1 else f.path for f in fields if f.dtype == dtype],
-                  [f.shape for f in fields if f.dtype == dtype]) for dtype, block in blocks.items()],
+                  [(f.shape, dtype) for f in fields if f.dtype == dtype]) for dtype, block in blocks.items()],
                 *_read_plan(fields), steps)
         return self._laid_out
 

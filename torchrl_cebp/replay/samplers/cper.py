@@ -46,11 +46,13 @@ class CPERSampler(EpisodePrioritySampler):
 
     def check_episodes(self, episodes: TensorDictBase) -> None:
         """Refuses episodes whose valid steps' touch is not finite, before an episode storage stores them."""
-        super().check_episodes(episodes)
-        self._touch(episodes, valid_steps(episode_lengths(episodes, self.end_key), episodes.shape[1]))
+        self._touch(episodes)
 
-    def _touch(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+    def _touch(self, episodes: TensorDictBase, valid: torch.Tensor | None = None) -> torch.Tensor:
         touch = require_key(episodes, self.touch_key, (2,)).sum(-1, dtype=torch.float64)
+        if bool(touch.isfinite().all()):  # the usual episode: no valid steps to find
+            return touch
+        valid = valid_steps(episode_lengths(episodes, self.end_key), episodes.shape[1]) if valid is None else valid
         unreadable = valid & ~touch.isfinite()  # NaN never passes the threshold: every later step would weigh 1
         if unreadable.any():
             raise ValueError(f"CPERSampler: touch {self.touch_key!r} is {touch[unreadable].tolist()} at the (episode, "
