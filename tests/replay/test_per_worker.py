@@ -321,3 +321,11 @@ def test_a_write_into_none_of_a_workers_rows_after_the_wrap_keeps_it_drawing():
     rb.extend(valued(7, 8))  # rows 1 and 2: one of each worker's, scored at the next draw
     rb.sample()
     assert [shard.state_dict()["priorities"].tolist() for shard in sampler.samplers] == [[6, 8, 5], [7, 4]]
+
+
+@pytest.mark.parametrize("make_shard", [UniformEpisodeSampler, lambda: PERSampler(8 * T)], ids=["uniform", "per"])
+def test_an_empty_per_worker_buffer_refuses_a_draw_in_torchrl_words(make_shard):
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(16 * T), sampler=PerWorkerSampler(make_shard(), make_shard()),
+                                dim_extend=0, batch_size=4)
+    with pytest.raises(RuntimeError, match="Cannot sample from an empty storage"):
+        rb.sample()

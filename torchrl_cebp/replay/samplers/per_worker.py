@@ -13,7 +13,8 @@ from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import stored_lengths
-from torchrl_cebp.replay.samplers.base import EpisodeSampler, dump_state, load_state, split_index, stored_rows
+from torchrl_cebp.replay.samplers.base import (EMPTY_STORAGE_ERROR, EpisodeSampler, dump_state, load_state, split_index,
+                                               stored_rows)
 
 
 @dataclass(frozen=True)
@@ -309,6 +310,8 @@ class PerWorkerSampler(Sampler):
         if batch_size % workers:
             raise ValueError(f"PerWorkerSampler draws batch_size // workers from each worker: batch_size={batch_size} "
                              f"must be a multiple of workers={workers}")
+        if not len(storage):  # TorchRL's words, which its samplers raise on an empty storage
+            raise RuntimeError(EMPTY_STORAGE_ERROR)
         views = self.worker_views(storage)
         # The last worker owns the fewest of the filled rows: if it has one, every worker has.
         if not self.layout.rows_of_worker(storage.shape[0], workers - 1):
