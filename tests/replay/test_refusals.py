@@ -230,3 +230,18 @@ def test_a_write_with_collector_ids_after_the_first_gets_every_check_and_leaves_
     with_ids["observation"] = with_ids["observation"].float()
     rb.extend(with_ids)
     assert len(rb) == 3 * T and "collector" not in rb.storage.get(slice(0, 3)).keys()
+
+
+@pytest.mark.parametrize("written_before", [False, True])
+def test_a_memmap_storage_loaded_from_a_state_keeps_its_rows_in_its_scratch_dir(tmp_path, written_before):
+    source = TensorDictReplayBuffer(storage=EpisodeMemmapStorage(4 * T, scratch_dir=str(tmp_path / "source")),
+                                    dim_extend=0)
+    source.extend(make_episodes(2))
+    target = TensorDictReplayBuffer(storage=EpisodeMemmapStorage(4 * T, scratch_dir=str(tmp_path / "target")),
+                                    dim_extend=0)
+    if written_before:
+        target.extend(make_episodes(1, seed=1))
+    target.load_state_dict(source.state_dict())
+    observation = _upstream.stored_tensordict(target.storage).get("observation")
+    assert Path(observation.filename).parent == tmp_path / "target"  # not anonymous memory, which RAM must hold
+    assert torch.equal(target.storage.get(slice(0, 2))["observation"], make_episodes(2)["observation"])
