@@ -25,8 +25,8 @@ from pathlib import Path
 import torch
 
 from _peers import (
-    BATCH_SIZE, FUTURE_P, build_torchrl_her, elapsed_ms, episodes_to_tensordict, make_episodes, our_samplers,
-    sparse_reward,
+    BATCH_SIZE, FUTURE_P, build_torchrl_her, elapsed_ms, episodes_to_tensordict, in_turn_order, make_episodes,
+    our_samplers, sparse_reward,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -116,9 +116,7 @@ def main() -> None:
             times: dict[str, list[float]] = {f"{v} {m}": [] for v in versions for m in measures}
             times["torchrl write"] = []
             for turn in range(WARMUP + args.repeats):
-                # Each version goes first in every other turn: the one timed second finds the draw's code warm, which
-                # made identical draws measure 0.87-0.92x when the order was fixed.
-                for version, (draw, write) in list(versions.items())[:: 1 if turn % 2 else -1]:
+                for version, (draw, write) in in_turn_order(list(versions.items()), turn):
                     measured = {"draw": elapsed_ms(draw), "write": elapsed_ms(write)}
                     measured["draw after write"] = elapsed_ms(draw)
                     if turn >= WARMUP:

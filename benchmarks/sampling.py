@@ -24,7 +24,7 @@ import torch
 
 from _peers import (
     BATCH_SIZE, EPISODE_LENGTH, FUTURE_P, PEERS, Draw, Episodes, Write, build_torchrl_her, elapsed_ms,
-    episodes_to_tensordict, make_episodes, our_samplers, require_stable_baselines3, sparse_reward,
+    episodes_to_tensordict, in_turn_order, make_episodes, our_samplers, require_stable_baselines3, sparse_reward,
 )
 
 # Episodes the write timings cycle through; fresh data, never the stored episodes again.
@@ -53,7 +53,8 @@ def writes_needed(repeats: int) -> int:
 
 
 def measure(draw: Draw, write: Write, repeats: int, torchrl_write: Write) -> Timing:
-    """Medians over ``repeats``; makes exactly ``writes_needed(repeats)`` writes, and ``repeats`` of ``torchrl_write``."""
+    """Medians over ``repeats``; makes exactly ``writes_needed(repeats)`` writes, and ``repeats`` of
+    ``torchrl_write``."""
     for _ in range(WARMUP):
         draw()
         write()
@@ -65,7 +66,7 @@ def measure(draw: Draw, write: Write, repeats: int, torchrl_write: Write) -> Tim
     writes = [elapsed_ms(write) for _ in range(repeats)]
     in_turns: dict[Write, list[float]] = {write: [], torchrl_write: []}
     for turn in range(repeats):
-        for timed in list(in_turns)[:: 1 if turn % 2 else -1]:
+        for timed in in_turn_order(list(in_turns), turn):
             in_turns[timed].append(elapsed_ms(timed))
     return Timing(statistics.median(draws), statistics.median(after_write), statistics.median(writes),
                   statistics.median(in_turns[write]), statistics.median(in_turns[torchrl_write]))
@@ -113,14 +114,17 @@ def _our_methods() -> dict[str, Builder]:
     return methods
 
 
+def _turns_table(title: str, results: dict[str, Timing]) -> str:
+    """Each method's write beside the TorchRL write timed in the same turns, and their ratio."""
+    header = f"{'method':<20} {'median ms':>10} {'TorchRL ms':>11} {'/ TorchRL':>10}"
+    lines = [title, header, "-" * len(header)]
+    for name, timing in results.items():
+        lines.append(f"{name:<20} {timing.write_in_turns_ms:>10.3f} {timing.torchrl_write_in_turns_ms:>11.3f} "
+                     f"{timing.write_over_torchrl:>9.3g}x")
+    return "\n".join(lines)
+
+
 def _table(title: str, results: dict[str, Timing], field: str) -> str:
-    if field == "write_in_turns_ms":
-        header = f"{'method':<20} {'median ms':>10} {'TorchRL ms':>11} {'/ TorchRL':>10}"
-        lines = [title, header, "-" * len(header)]
-        for name, timing in results.items():
-            lines.append(f"{name:<20} {timing.write_in_turns_ms:>10.3f} {timing.torchrl_write_in_turns_ms:>11.3f} "
-                         f"{timing.write_over_torchrl:>9.3g}x")
-        return "\n".join(lines)
     peers = [p for p in PEERS if p in results]
     header = f"{'method':<20} {'median ms':>10}" + "".join(f" {'/ ' + p:>16}" for p in peers)
     lines = [title, header, "-" * len(header)]
@@ -177,9 +181,10 @@ def main() -> None:
             ("draw a batch", "draw_ms"),
             ("draw a batch, one episode written since the last draw", "draw_after_write_ms"),
             ("write one episode", "write_ms"),
-            ("write one episode, in turns with a write of TorchRL's HERReplayBuffer", "write_in_turns_ms"),
         ):
             print("\n" + _table(f"{title} ({n} episodes)", results, field))
+        turns_title = f"write one episode, in turns with a write of TorchRL's HERReplayBuffer ({n} episodes)"
+        print("\n" + _turns_table(turns_title, results))
 
 
 if __name__ == "__main__":

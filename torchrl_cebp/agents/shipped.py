@@ -26,7 +26,6 @@ FETCH_AGENTS: tuple[str, ...] = tuple(task for task in SHIPPED_AGENTS if task in
 SHIPPING_BAR: dict[str, float] = {"pick_place": 0.85, "push": 0.95, "franka_pick_place": 0.8}
 
 
-
 class SuiteCheck(NamedTuple):
     """What the test suite asks of every shipped Fetch agent: ``success`` over ``episodes`` episodes from ``seed`` on,
     seeds that neither the trainer's test episodes nor the card's score used.

@@ -197,13 +197,13 @@ class _EpisodeRows:
                 # Empty, not zeros: the unfilled rows' memory stays untouched until written.
                 full = saved.apply(lambda t: torch.empty((rows, *t.shape[1:]), dtype=t.dtype),
                                    batch_size=[rows, *saved.shape[1:]])
-                if isinstance(self, LazyMemmapStorage):  # into files in its scratch_dir, as its first write makes them
+                if memmap := isinstance(self, LazyMemmapStorage):  # into files in its scratch_dir, as a first write
                     full = full.memmap_like(prefix=self.scratch_dir)
                 full[: saved.shape[0]] = saved
                 state_dict = {**state_dict, _upstream.STORAGE_STATE_KEY: full.state_dict()}
-                # TorchRL loads into a stored tensordict by reference, where into none it clones every row (all of
-                # the capacity's memory); ``full`` is this storage's own, so nothing else holds it.
-                _upstream.replace_stored_tensordict(self, full if full.is_memmap() else TensorDict())
+                # TorchRL loads into a stored tensordict by reference (a memmap one: in place, into its own files),
+                # where into none it clones every row (all of the capacity's memory); ``full`` is this storage's own.
+                _upstream.replace_stored_tensordict(self, full if memmap else TensorDict())
         super().load_state_dict(state_dict)
         self._after_load()
 

@@ -225,7 +225,7 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         """Each row's write count, then of write starts and ends: the storage's, or this sampler's if it keeps none."""
         if self._scored_storage is None:
             self._scored_storage = weakref.ref(storage)
-        elif self._scored_storage() is not storage:  # its rows are another storage's: their scores would be wrong here
+        elif self._scored_storage() is not storage:  # every write and draw asks here first: refused before either
             raise ValueError(f"{type(self).__name__} scores the episodes of another storage, not of this "
                              f"{type(storage).__name__}: use one sampler per buffer (a new one, or one given a state)")
         counts = getattr(storage, "write_counts", None)
