@@ -33,7 +33,8 @@ sync_once() {
     if ! cmp -s "$csv" "$dest"; then
       mkdir -p "$(dirname "$dest")" && cp "$csv" "$dest" && copied+=("$dest")
     fi
-  done < <(find runs -path runs/quick -prune -o -name progress.csv -print 2>/dev/null | sort)
+  done < <(find -H runs -path runs/quick -prune -o -name progress.csv -print 2>/dev/null | sort)
+  # -H: runs/ may be a link to a folder outside the checkout, which a new checkout keeps.
   # Only the copied CSVs: other edits under docs/results/ (a figure being redrawn) are not this script's to commit.
   if [ "${#copied[@]}" -gt 0 ]; then
     git add -- "${copied[@]}"

@@ -23,10 +23,10 @@ REPO = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.bookkeeping
 
 
-def queued_runs(*overrides: str) -> list[list[str]]:
+def queued_runs(*overrides: str, only: str = "") -> list[list[str]]:
     out = subprocess.run(
         ["bash", "scripts/run_comparison.sh", *overrides], cwd=REPO, capture_output=True, text=True, check=True,
-        env={**os.environ, "PYTHON": "echo", "JOBS": "2", "SKIP_COMMITTED": "0"},
+        env={**os.environ, "PYTHON": "echo", "JOBS": "2", "SKIP_COMMITTED": "0", "ONLY": only},
     )
     return [line.split()[1:] for line in out.stdout.splitlines() if line.startswith("train.py")]
 
@@ -55,6 +55,14 @@ def test_run_comparison_queues_one_valid_run_per_stage_and_seed():
     for agent in agents:  # an agent resumes its comparison run's folder, and trains it longer
         extended = [run for run in stage_runs if folders[" ".join(run)] == folders[" ".join(agent)]]
         assert len(extended) == 1 and epochs[" ".join(agent)] > epochs[" ".join(extended[0])]
+
+
+def test_run_comparison_only_queues_the_runs_matching_its_pattern():
+    every_run = queued_runs()
+    stage = queued_runs(only="pick_place_temperature")
+    assert sorted(stage) == sorted(run for run in every_run if "+comparison=pick_place_temperature" in run)
+    assert len(stage) == 18 and sum("sampler=her" in run for run in stage) == 3  # 5 temperatures and HER, 3 seeds
+    assert queued_runs(only="no_such_stage") == []
 
 
 def test_run_comparison_runs_nothing_once_every_run_is_committed(tmp_path):

@@ -79,6 +79,25 @@ if not OmegaConf.has_resolver("replay_label"):
     OmegaConf.register_new_resolver("replay_label", replay_label)
 
 
+def temperature_label(sampler: str, temperature: float | None = None) -> str:
+    """The run folder's sampler part in a temperature ablation: ``cebp_T<T>`` for CEBP, the sampler's name otherwise.
+
+    Args:
+        sampler (str): the sampler's config name (``hydra:runtime.choices.sampler``).
+        temperature (float, optional): the sampler's sigmoid temperature; ``None`` for a sampler without one.
+            Defaults to ``None``.
+
+    Examples:
+        >>> temperature_label("cebp", 0.01), temperature_label("cebp", 5), temperature_label("her")
+        ('cebp_T0.01', 'cebp_T5', 'her')
+    """
+    return sampler if temperature is None else f"{sampler}_T{temperature}"
+
+
+if not OmegaConf.has_resolver("temperature_label"):
+    OmegaConf.register_new_resolver("temperature_label", temperature_label)
+
+
 class ConfigError(ValueError):
     """A config value outside its allowed range or set.
 

@@ -9,7 +9,11 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from tensordict import TensorDictBase
+from tensordict.utils import NestedKey
 from torchrl.record.loggers import Logger, get_logger
+
+from torchrl_cebp.replay.episodes import episode_lengths, next_key
 
 CSV_NAME = "progress.csv"
 # Where the per-epoch rows go besides the CSV, through TorchRL's loggers.
@@ -186,3 +190,86 @@ class EpochLog:
         if self._logger is not None:
             for key, value in row.items():
                 self._logger.log_scalar(key, value, step=epoch)
+
+
+def exploration_stats(
+    first_achieved: torch.Tensor, last_achieved: torch.Tensor, success_radius: float, cell: float = 0.02
+) -> dict[str, float]:
+    """How far a set of episodes explored, from their achieved goals (the object's position) at start and end.
+
+    - ``explore_moved_share``: the share of episodes whose object ended more than ``success_radius`` from where
+      it started, i.e. moved far enough that the episode, relabelled, teaches something about moving it;
+    - ``explore_goal_entropy_bits``: the Shannon entropy, in bits, of the episodes' final achieved goals binned
+      on a grid of ``cell`` metres; 0 when every object ends in one cell, ``log2(n)`` when each ends in its own.
+
+    Args:
+        first_achieved (torch.Tensor): ``[n, goal_dim]`` achieved goals before each episode's first action.
+        last_achieved (torch.Tensor): ``[n, goal_dim]`` achieved goals after each episode's last valid step.
+        success_radius (float): the task's success distance (the env's ``distance_threshold``).
+        cell (float, optional): the grid's cell size in metres. Defaults to ``0.02``.
+
+    Example:
+        >>> start = torch.zeros(4, 3)
+        >>> end = torch.tensor([[0.0, 0, 0], [0.1, 0, 0], [0.0, 0.1, 0], [0.0, 0.1, 0]])
+        >>> exploration_stats(start, end, success_radius=0.05)
+        {'explore_moved_share': 0.75, 'explore_goal_entropy_bits': 1.5}
+    """
+    if first_achieved.shape[0] == 0:
+        return {}
+    moved = (last_achieved - first_achieved).norm(dim=-1) > success_radius
+    _, counts = torch.floor(last_achieved.double() / cell).long().unique(dim=0, return_counts=True)
+    shares = counts.double() / counts.sum()
+    return {
+        "explore_moved_share": moved.double().mean().item(),
+        "explore_goal_entropy_bits": (-(shares * shares.log2()).sum()).item() + 0.0,  # + 0.0: -0.0 for one cell
+    }
+
+
+class ExplorationLog:
+    """Collects an epoch's episodes' first and last achieved goals and gives :func:`exploration_stats` of them.
+
+    Args:
+        success_radius (float): the task's success distance (the env's ``distance_threshold``).
+        cell (float, optional): the entropy's grid cell in metres. Defaults to ``0.02``.
+        achieved_goal_key (NestedKey, optional): the achieved goal at the root; its ``"next"`` entry is read at
+            each episode's last valid step. Defaults to ``"achieved_goal"``.
+        end_key (NestedKey, optional): the flag that ends an episode before its row does.
+            Defaults to ``("next", "done")``.
+
+    Example:
+        >>> from torchrl_cebp.envs import make_env
+        >>> env = make_env("push", seed=0, num_envs=2)
+        >>> log = ExplorationLog(env.distance_threshold)
+        >>> log.update(env.rollout(50))
+        >>> sorted(log.compute())
+        ['explore_goal_entropy_bits', 'explore_moved_share']
+        >>> log.compute()  # compute() starts the next epoch
+        {}
+        >>> env.close()
+    """
+
+    def __init__(self, success_radius: float, cell: float = 0.02, achieved_goal_key: NestedKey = "achieved_goal",
+                 end_key: NestedKey = ("next", "done")) -> None:
+        self.success_radius, self.cell, self.end_key = success_radius, cell, end_key
+        self.achieved_goal_key, self.next_achieved_goal_key = achieved_goal_key, next_key(achieved_goal_key)
+        self._first: list[torch.Tensor] = []
+        self._last: list[torch.Tensor] = []
+
+    def update(self, episodes: TensorDictBase) -> None:
+        """Adds ``[n, T]`` episodes (steps after an episode's end flag are padding and ignored).
+
+        Args:
+            episodes (TensorDictBase): ``[n, T]`` episodes.
+        """
+        last_step = episode_lengths(episodes, self.end_key) - 1
+        self._first.append(episodes.get(self.achieved_goal_key)[:, 0])
+        next_achieved = episodes.get(self.next_achieved_goal_key)
+        self._last.append(next_achieved[torch.arange(next_achieved.shape[0]), last_step])
+
+    def compute(self) -> dict[str, float]:
+        """:func:`exploration_stats` of the episodes added since the last call (``{}`` for none), and a fresh start."""
+        if not self._first:
+            return {}
+        first, last = torch.cat(self._first), torch.cat(self._last)
+        self._first, self._last = [], []
+        return exploration_stats(first, last, self.success_radius, self.cell)

@@ -50,7 +50,7 @@ from torchrl_cebp.training.checkpoint import (
 from torchrl_cebp.training.collection import EpisodeBatches
 from torchrl_cebp.training.config import ConfigError, resolve_device, validate_config, warn_if_bf16_is_emulated
 from torchrl_cebp.training.evaluation import evaluate_success_rate
-from torchrl_cebp.training.metrics import EpochLog
+from torchrl_cebp.training.metrics import EpochLog, ExplorationLog
 
 # The streams derive_seed(seed, epoch, stream) names: each epoch restarts them, so a resumed run repeats.
 COLLECTION_STREAM, TEST_STREAM = 0, 1
@@ -124,6 +124,8 @@ class Learner:
         her (HindsightRelabel): the replay's relabelling, which also feeds the normaliser.
         sampler (Sampler): the replay's sampler.
         device (torch.device): where the updates run.
+        exploration (ExplorationLog, optional): measures how far the stored episodes explored, for
+            :meth:`epoch_means`. Defaults to ``None`` (not measured).
 
     Example:
         >>> from pathlib import Path
@@ -147,9 +149,11 @@ class Learner:
     """
 
     def __init__(self, cfg: DictConfig, agent: Agent, optimizer: torch.optim.Optimizer, replay: TensorDictReplayBuffer,
-                 her: HindsightRelabel, sampler: Sampler, device: torch.device) -> None:
+                 her: HindsightRelabel, sampler: Sampler, device: torch.device,
+                 exploration: ExplorationLog | None = None) -> None:
         self.cfg, self.agent, self.optimizer, self.replay, self.sampler, self.device = (
             cfg, agent, optimizer, replay, sampler, device)
+        self.exploration = exploration
         self.normalizer_feed = RelabelledTransitions(her)
         self.beta_scheduler = beta_annealing(sampler)
         self.totals: dict[str, torch.Tensor] = defaultdict(float)
@@ -162,6 +166,8 @@ class Learner:
         """
         self.replay.extend(episodes)
         self.agent.normalizer.update(self.normalizer_feed(episodes))
+        if self.exploration is not None:
+            self.exploration.update(episodes)
 
     def update(self) -> None:
         """One draw and one gradient step of actor and critic; the drawn priorities are updated."""
@@ -190,11 +196,13 @@ class Learner:
             refit(self.replay.storage)
 
     def epoch_means(self) -> dict[str, float]:
-        """Per-update means of the losses and weights since the last call, and the sampler's spread."""
+        """Per-update means of the losses and weights since the last call, the sampler's spread, and how far the
+        episodes stored since the last call explored."""
         n_updates = self.cfg.cycles_per_epoch * self.cfg.updates_per_cycle
         means = {key: (value / n_updates).item() for key, value in self.totals.items()}
         self.totals.clear()
-        return {**means, **sampling_spread(self.sampler)}
+        explored = self.exploration.compute() if self.exploration is not None else {}
+        return {**means, **sampling_spread(self.sampler), **explored}
 
 
 def run_epoch(cfg: DictConfig, epoch: int, learner: Learner, batches: EpisodeBatches) -> dict[str, float]:
@@ -295,7 +303,7 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     agent = make_agent(cfg, dims, device)
     optimizer = make_optimizer(cfg, agent.loss)
     replay, her = make_replay(cfg, sampler, test_env)
-    learner = Learner(cfg, agent, optimizer, replay, her, sampler, device)
+    learner = Learner(cfg, agent, optimizer, replay, her, sampler, device, ExplorationLog(test_env.distance_threshold))
     batches = make_training_collector(cfg, agent, dims)
     start_epoch, wall_before = 0, 0.0
     if state is not None:  # after every part is built: building one may draw from the restored random streams
