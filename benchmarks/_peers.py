@@ -11,7 +11,6 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TypeVar
 
 import numpy as np
@@ -86,7 +85,9 @@ def our_samplers(capacity: int) -> dict[str, tuple[str, dict]]:
     episodes (the env config's settings) in a storage of ``capacity`` transitions, by which PER's trees are sized."""
     from omegaconf import OmegaConf
 
-    push = OmegaConf.load(Path(__file__).parents[1] / "conf" / "env" / "push.yaml")
+    from torchrl_cebp.training.config import CONFIG_DIR
+
+    push = OmegaConf.load(CONFIG_DIR / "env" / "push.yaml")
     workspace = tuple(map(tuple, push.gripper_workspace))
     return {
         "uniform": ("UniformEpisodeSampler", {}),

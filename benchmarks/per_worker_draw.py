@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-from pathlib import Path
 
 import torch
 from omegaconf import OmegaConf
@@ -34,8 +33,9 @@ def main() -> None:
 
     from torchrl_cebp.replay import HindsightRelabel, make_replay_buffer
     from torchrl_cebp.replay.samplers import InitialCEBPSampler, PERSampler, PerWorkerSampler, UniformEpisodeSampler
+    from torchrl_cebp.training.config import CONFIG_DIR
 
-    push = OmegaConf.load(Path(__file__).parents[1] / "conf" / "env" / "push.yaml")
+    push = OmegaConf.load(CONFIG_DIR / "env" / "push.yaml")
     workspace = tuple(map(tuple, push.gripper_workspace))
 
     def reward_fn(ag: torch.Tensor, g: torch.Tensor) -> torch.Tensor:

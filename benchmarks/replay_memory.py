@@ -20,9 +20,9 @@ import tempfile
 from pathlib import Path
 
 import torch
-from hydra import compose, initialize_config_dir
 
 import torchrl_cebp.training.config  # noqa: F401  (registers the config's resolvers)
+from torchrl_cebp.training.config import compose_config
 from torchrl_cebp.training.builders import (
     TaskDims, episodes_per_cycle, make_agent, make_env, make_replay, make_sampler, make_training_collector,
     replay_capacity,
@@ -42,9 +42,7 @@ def peak_mib() -> float:
 
 
 def config(sampler: str, capacity_per: str):
-    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
-        return compose("config", overrides=["preset=paper", "env=push", f"sampler={sampler}",
-                                            f"replay.capacity_per={capacity_per}"])
+    return compose_config("preset=paper", "env=push", f"sampler={sampler}", f"replay.capacity_per={capacity_per}")
 
 
 def fill(sampler: str, capacity_per: str, epochs: int, state_path: Path) -> None:
@@ -80,7 +78,7 @@ def restore(sampler: str, capacity_per: str, state_path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--epochs", type=int, nargs="+", default=[1, 25, 50], help="epochs of episodes to store")
-    parser.add_argument("--sampler", default="cebp_initial", help="the sampler config (conf/sampler/)")
+    parser.add_argument("--sampler", default="cebp_initial", help="the sampler config (torchrl_cebp/conf/sampler/)")
     parser.add_argument("--layouts", nargs="+", default=["worker", "total"], choices=["worker", "total"],
                         help="replay.capacity_per values to compare")
     parser.add_argument("--child", nargs=4, metavar=("MODE", "LAYOUT", "EPOCHS", "STATE"), help=argparse.SUPPRESS)

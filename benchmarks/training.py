@@ -42,7 +42,6 @@ import gymnasium_robotics
 import numpy as np
 import torch
 from _peers import require_stable_baselines3
-from hydra import compose, initialize_config_dir
 from torch import nn
 
 T = 50
@@ -60,17 +59,15 @@ class Timing:
 
 def run_ours(cycles: int, workers: int, overlap: bool, threads: int, precision: str = "fp32", sampler: str = "her",
              per_worker: bool = True) -> Timing:
-    from pathlib import Path
 
     from torchrl_cebp.training import train
+    from torchrl_cebp.training.config import compose_config
 
-    conf = Path(__file__).resolve().parents[1] / "conf"
-    with initialize_config_dir(str(conf), version_base="1.3"):
-        cfg = compose("config", overrides=[
-            "env=push", "env.goal_space=standard", "epochs=1", f"cycles_per_epoch={cycles}", f"workers={workers}",
-            f"overlap_collection={str(overlap).lower()}", f"threads={threads}", f"precision={precision}", "device=cpu",
-            f"sampler={sampler}", f"replay.per_worker={str(per_worker).lower()}",
-        ])
+    cfg = compose_config(
+        "env=push", "env.goal_space=standard", "epochs=1", f"cycles_per_epoch={cycles}", f"workers={workers}",
+        f"overlap_collection={str(overlap).lower()}", f"threads={threads}", f"precision={precision}", "device=cpu",
+        f"sampler={sampler}", f"replay.per_worker={str(per_worker).lower()}",
+    )
     with tempfile.TemporaryDirectory() as run_dir:
         with open(train(cfg, run_dir), newline="") as f:
             row = next(csv.DictReader(f))
@@ -230,7 +227,7 @@ def main() -> None:
         help="NAME[:THREADS] with NAME in ours, ours_merged, ours_overlap, ours_overlap_bf16, plain, sb3; THREADS (torch threads) defaults to --threads",
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads of a method given without :THREADS")
-    parser.add_argument("--sampler", default="her", help="our trainer's sampler config (conf/sampler/), e.g. cebp_initial")
+    parser.add_argument("--sampler", default="her", help="our trainer's sampler config (torchrl_cebp/conf/sampler/), e.g. cebp_initial")
     parser.add_argument("--repeats", type=int, default=1, help="runs of every method, interleaved; each reports its median")
     args = parser.parse_args()
     gym.register_envs(gymnasium_robotics)

@@ -3,7 +3,7 @@
 The loop of TorchRL's ``sota-implementations/ddpg/ddpg.py`` as it is: a collector yields frames,
 ``replay_buffer.extend(frames)``, then ``utd_ratio`` updates per frame of sample, loss, optimiser
 step and target update. Our pieces come in through ``make_*`` calls only: the env, the agent
-(actor, critic, HER's DDPG loss and soft update, from ``conf/config.yaml``), the sampler (``conf/sampler/``)
+(actor, critic, HER's DDPG loss and soft update, from ``torchrl_cebp/conf/config.yaml``), the sampler (``torchrl_cebp/conf/sampler/``)
 and a stock TorchRL buffer whose ``EpisodeWriter`` assembles the collector's frames into episodes,
 which HER relabels as they are drawn.
 
@@ -13,36 +13,33 @@ which HER relabels as they are drawn.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import torch
-from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 from tensordict import TensorDict
 from torchrl.collectors import Collector
 from torchrl.data import TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType
 
-import torchrl_cebp.training.config  # noqa: F401  (registers the config's resolvers)
 from torchrl_cebp.envs import compute_reward_of
 from torchrl_cebp.replay import EpisodeWriter, HindsightRelabel, make_replay_buffer
+from torchrl_cebp.training.config import CONFIG_DIR, compose_config
 from torchrl_cebp.training.builders import (
     TaskDims, make_agent, make_env, make_optimizer, make_sampler, replay_capacity,
 )
 from torchrl_cebp.training.trainer import RelabelledTransitions, beta_annealing
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
 def config_choices(group: str) -> list[str]:
-    """The configs of a group of ``conf/`` (e.g. ``"sampler"``), so that a wrong name is refused with the right ones."""
-    return sorted(path.stem for path in (CONF / group).glob("*.yaml"))
+    """The configs of a group of ``torchrl_cebp/conf/`` (e.g. ``"sampler"``), so that a wrong name is refused with the right ones."""
+    return sorted(path.stem for path in (CONFIG_DIR / group).glob("*.yaml"))
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--env", default="push", choices=config_choices("env"), help="a config of conf/env/")
-    parser.add_argument("--sampler", default="cebp", choices=config_choices("sampler"), help="a config of conf/sampler/")
+    parser.add_argument("--env", default="push", choices=config_choices("env"), help="a config of torchrl_cebp/conf/env/")
+    parser.add_argument("--sampler", default="cebp", choices=config_choices("sampler"), help="a config of torchrl_cebp/conf/sampler/")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--envs", type=int, default=2, help="simulations the collector steps, as one batched env")
     parser.add_argument("--frames-per-batch", type=int, default=100)
@@ -62,10 +59,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def project_config(args: argparse.Namespace) -> DictConfig:
-    """The project's config (``conf/``) for this env and sampler: the agent's and HER's settings, stated once there."""
-    with initialize_config_dir(str(CONF), version_base="1.3"):
-        return compose("config", overrides=[f"env={args.env}", f"sampler={args.sampler}", f"seed={args.seed}",
-                                            f"replay.capacity={args.buffer_size}", f"batch_size={args.batch_size}"])
+    """The package's config (``torchrl_cebp/conf/``) for this env and sampler: the agent's and HER's settings, stated
+    once there."""
+    return compose_config(f"env={args.env}", f"sampler={args.sampler}", f"seed={args.seed}",
+                          f"replay.capacity={args.buffer_size}", f"batch_size={args.batch_size}")
 
 
 def main(argv: list[str] | None = None) -> tuple[TensorDictReplayBuffer, TensorDict]:

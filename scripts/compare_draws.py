@@ -24,7 +24,7 @@ probabilities ``p`` over the ``N`` stored episodes and prints, per sampler:
   1 for a sampler without weights. ``is_mean`` is its exact expectation under the draw; ``is_ess`` is the average
   over ``--is-batches`` batches drawn with ``p`` from a generator seeded with ``--seed``, the same for every sampler.
 
-``--temperatures`` adds the paper-form CEBP (``conf/sampler/cebp.yaml``) at each sigmoid temperature ``T``, each
+``--temperatures`` adds the paper-form CEBP (``torchrl_cebp/conf/sampler/cebp.yaml``) at each sigmoid temperature ``T``, each
 labelled ``cebp_T<T>``, beside the ``--samplers``, and ``--summary`` draws ``ess``, ``kl``, ``moved``, ``is_mean``
 and ``is_ess`` after the last epoch against ``T`` on a log axis, with each of the ``--samplers`` as a horizontal
 line: the temperature ablation's draws, on episodes that are the same for every ``T``.
@@ -59,10 +59,10 @@ from torchrl_cebp.replay.episodes import valid_steps
 from torchrl_cebp.replay.samplers import EpisodePrioritySampler, PerWorkerSampler
 from torchrl_cebp.training.builders import episodes_per_cycle, make_sampler, replay_capacity
 from torchrl_cebp.training.checkpoint import load_checkpoint, stored_episodes
+from torchrl_cebp.training.config import CONFIG_DIR
 from torchrl_cebp.training.trainer import sampling_spread
 
-REPO = Path(__file__).resolve().parents[1]
-SAMPLER_CONFIGS = REPO / "conf" / "sampler"
+SAMPLER_CONFIGS = CONFIG_DIR / "sampler"
 METRICS = ("ess", "kl", "moved", "touched", "reached", "top1%", "moved weighted", "top1% weighted", "is_mean",
            "is_ess")
 # The temperature ablation's question: how concentrated each T's draw is, on what, and what its IS weights undo.
@@ -79,7 +79,7 @@ def episode_priority_samplers() -> list[str]:
 
 
 def sampler_config(run_cfg: DictConfig, name: str) -> DictConfig:
-    """The run's config with ``sampler`` swapped for ``conf/sampler/<name>.yaml``, resolved against the run's env.
+    """The run's config with ``sampler`` swapped for ``torchrl_cebp/conf/sampler/<name>.yaml``, resolved against the run's env.
 
     The run's own sampler keeps the run's settings (a temperature sweep's, say), not the config file's defaults.
     """
@@ -101,7 +101,7 @@ def temperature_label(temperature: float) -> str:
 
 
 def temperature_config(run_cfg: DictConfig, temperature: float) -> DictConfig:
-    """The run's config with the paper-form CEBP (``conf/sampler/cebp.yaml``) at sigmoid temperature ``temperature``."""
+    """The run's config with the paper-form CEBP (``torchrl_cebp/conf/sampler/cebp.yaml``) at sigmoid temperature ``temperature``."""
     cfg = sampler_config(run_cfg, "cebp")
     cfg.sampler.temperature = temperature
     return cfg
@@ -298,9 +298,9 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run_dir", type=Path, help="a run folder with a checkpoint.pt")
     parser.add_argument("--samplers", nargs="+", default=["her", "cebp_initial", "cebp", "ebp", "mep"],
-                        help="sampler configs of conf/sampler/ to compare (default: %(default)s)")
+                        help="sampler configs of torchrl_cebp/conf/sampler/ to compare (default: %(default)s)")
     parser.add_argument("--temperatures", nargs="+", type=float, default=[], metavar="T",
-                        help="also compare the paper-form CEBP (conf/sampler/cebp.yaml) at each of these sigmoid "
+                        help="also compare the paper-form CEBP (torchrl_cebp/conf/sampler/cebp.yaml) at each of these sigmoid "
                              "temperatures, labelled cebp_T<T> (default: none)")
     parser.add_argument("--is-batch", type=int, default=256,
                         help="draws per batch (per worker, under per-worker replay) for is_mean and is_ess "

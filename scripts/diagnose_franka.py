@@ -29,13 +29,11 @@ import itertools
 import os
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "osmesa")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402  (torchrl_cebp imports tensordict before mujoco)
-from hydra import compose, initialize_config_dir  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 from tensordict import TensorDict  # noqa: E402
 
@@ -47,8 +45,8 @@ from torchrl_cebp.sim2real import SHIPPED_POLICY  # noqa: E402
 from torchrl_cebp.training import load_checkpoint, load_policy  # noqa: E402
 from torchrl_cebp.training.checkpoint import stored_episodes  # noqa: E402
 from torchrl_cebp.training.builders import episodes_per_cycle  # noqa: E402
+from torchrl_cebp.training.config import compose_config  # noqa: E402
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
 # gymnasium-robotics' Fetch draws goals in the air up to 0.45 m above the object's resting height.
 FETCH_AIR_HEIGHT = 0.45
 # Each env's pad geom and finger actuator, to read the physical parameters from.
@@ -222,34 +220,33 @@ def reach_grid(env: FrankaPickPlaceEnv, xs, ys, zs, label: str) -> list[Reach]:
 
 
 def schedules() -> dict[str, dict[str, float]]:
-    """The training schedule of Fetch PickAndPlace and of the Franka task at the paper's scale (conf/)."""
+    """The training schedule of Fetch PickAndPlace and of the Franka task at the paper's scale (torchrl_cebp/conf/)."""
     runs = {
         "Fetch PickAndPlace, preset=paper": ["env=pick_place", "preset=paper"],
         "Franka, preset=paper": ["env=franka_pick_place", "preset=paper"],
         "Franka, preset=paper rollouts_per_cycle=1": ["env=franka_pick_place", "preset=paper", "rollouts_per_cycle=1"],
     }
     out = {}
-    with initialize_config_dir(config_dir=str(CONF), version_base=None):
-        for label, overrides in runs.items():
-            cfg = compose("config", overrides=overrides)
-            env = FrankaPickPlaceEnv() if cfg.env.task == "franka_pick_place" else make_touch_fetch(cfg.env.task)
-            steps = env.max_episode_steps
-            gamma = 1.0 - 1.0 / steps  # HER's discount, as torchrl_cebp.training.builders.make_agent sets it
-            env_steps = episodes_per_cycle(cfg) * steps
-            batch = cfg.batch_size * cfg.workers
-            out[label] = {
-                "T (steps per episode)": steps,
-                "gamma = 1 - 1/T": gamma,
-                "return clip -1/(1-gamma)": -1.0 / (1.0 - gamma),
-                "episodes per cycle": episodes_per_cycle(cfg),
-                "env steps per cycle": env_steps,
-                "updates per cycle": cfg.updates_per_cycle,
-                "batch": batch,
-                "updates per env step": cfg.updates_per_cycle / env_steps,
-                "replayed transitions per env step": cfg.updates_per_cycle * batch / env_steps,
-                "env steps per epoch": env_steps * cfg.cycles_per_epoch,
-                "updates per epoch": cfg.updates_per_cycle * cfg.cycles_per_epoch,
-            }
+    for label, overrides in runs.items():
+        cfg = compose_config(*overrides)
+        env = FrankaPickPlaceEnv() if cfg.env.task == "franka_pick_place" else make_touch_fetch(cfg.env.task)
+        steps = env.max_episode_steps
+        gamma = 1.0 - 1.0 / steps  # HER's discount, as torchrl_cebp.training.builders.make_agent sets it
+        env_steps = episodes_per_cycle(cfg) * steps
+        batch = cfg.batch_size * cfg.workers
+        out[label] = {
+            "T (steps per episode)": steps,
+            "gamma = 1 - 1/T": gamma,
+            "return clip -1/(1-gamma)": -1.0 / (1.0 - gamma),
+            "episodes per cycle": episodes_per_cycle(cfg),
+            "env steps per cycle": env_steps,
+            "updates per cycle": cfg.updates_per_cycle,
+            "batch": batch,
+            "updates per env step": cfg.updates_per_cycle / env_steps,
+            "replayed transitions per env step": cfg.updates_per_cycle * batch / env_steps,
+            "env steps per epoch": env_steps * cfg.cycles_per_epoch,
+            "updates per epoch": cfg.updates_per_cycle * cfg.cycles_per_epoch,
+        }
     return out
 
 
@@ -387,7 +384,7 @@ def main() -> None:
     arm = reach_grid(bare, (0.3, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8), (-0.3, 0.0, 0.3), (low[2], 0.25, 0.4, high[2]),
                      "the bare arm (no box), out to the Sim2Real loop's former box")
 
-    print("schedule: composing conf/", flush=True)
+    print("schedule: composing torchrl_cebp/conf/", flush=True)
     schedule = schedules()
 
     episodes = [] if args.policy == "none" else policy_episodes(franka, args.policy, args.seed, args.placements)
@@ -419,7 +416,7 @@ def main() -> None:
         for p in missed:
             print(f"    unreachable {tuple(round(v, 3) for v in p.target)}: off by {p.error * 100:.1f} cm, "
                   f"tilted {p.tilt_deg:.0f} deg, swinging {p.swing * 100:.1f} cm, joint margin {p.joint_margin:.2f}")
-    print("\n-- training schedule (conf/config.yaml + conf/preset/paper.yaml)")
+    print("\n-- training schedule (torchrl_cebp/conf/config.yaml + preset/paper.yaml)")
     print(table(schedule))
     if episodes:
         print_policy(args.policy, episodes, franka.max_episode_steps)

@@ -21,10 +21,9 @@ import statistics
 import sys
 from pathlib import Path
 
-from hydra import compose, initialize_config_dir
 from hydra.core.hydra_config import HydraConfig
 
-import torchrl_cebp.training.config  # noqa: F401  (registers the resolvers that name the run folders)
+from torchrl_cebp.training.config import compose_config
 
 REPO = Path(__file__).resolve().parents[1]
 COMMITTED = REPO / "docs" / "results" / "comparison"
@@ -33,7 +32,7 @@ RUNS = REPO / "runs"
 
 def run_folder_and_epochs(overrides: list[str]) -> tuple[Path, int]:
     """The run folder under ``runs/`` that ``train.py <overrides>`` writes, and its number of epochs."""
-    cfg = compose("config", overrides=overrides, return_hydra_config=True)
+    cfg = compose_config(*overrides, return_hydra_config=True)
     HydraConfig.instance().set_config(cfg)  # the folder's name reads hydra:runtime.choices
     return Path(cfg.hydra.run.dir).relative_to("runs"), int(cfg.epochs)
 
@@ -142,19 +141,18 @@ def main() -> None:
     if args.jobs < 1:
         parser.error(f"--jobs must be at least 1, not {args.jobs}")
     plan = []
-    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
-        for line in sys.stdin:
-            if not line.strip():
-                continue
-            folder, epochs = run_folder_and_epochs(line.split())
-            if args.plan:
-                plan.append((folder, epochs))
-                continue
-            done = committed_epochs(folder, args.committed)
-            if done >= epochs:
-                print(f"[pending] skipped, {done} of {epochs} epochs committed: {folder}", file=sys.stderr)
-            else:
-                print(line.rstrip("\n"), flush=True)
+    for line in sys.stdin:
+        if not line.strip():
+            continue
+        folder, epochs = run_folder_and_epochs(line.split())
+        if args.plan:
+            plan.append((folder, epochs))
+            continue
+        done = committed_epochs(folder, args.committed)
+        if done >= epochs:
+            print(f"[pending] skipped, {done} of {epochs} epochs committed: {folder}", file=sys.stderr)
+        else:
+            print(line.rstrip("\n"), flush=True)
     if args.plan:
         print_plan(plan, args.committed, args.runs, args.jobs)
 

@@ -65,12 +65,10 @@ def run_overrides(run_dir: Path) -> list[str]:
 
 def card_state(task: str, policy: Path, overrides: list[str], episodes: int) -> dict:
     """The policy file's state with its ``card``, after the checks that it is the task's agent and its command."""
-    from hydra import compose, initialize_config_dir
-
     from torchrl_cebp.agents.shipped import SUITE_CHECK
     from torchrl_cebp.evaluate import success_rate
     from torchrl_cebp.training.checkpoint import RunCheckpoints, read_policy_state
-    from torchrl_cebp.training.config import check_same_run
+    from torchrl_cebp.training.config import check_same_run, compose_config
     from torchrl_cebp.training.metrics import CSV_NAME
 
     state = read_policy_state(policy)
@@ -78,8 +76,7 @@ def card_state(task: str, policy: Path, overrides: list[str], episodes: int) -> 
         raise ValueError(f"{policy} was trained on {state['env']['task']!r}, not {task!r}")
     run_dir = policy.parent
     saved = RunCheckpoints(run_dir).load()["config"]
-    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
-        check_same_run(saved, compose("config", overrides=overrides))
+    check_same_run(saved, compose_config(*overrides))
     with open(run_dir / CSV_NAME, newline="") as file:
         rows = list(csv.DictReader(file))
     score = success_rate(policy, episodes, FRESH_SEED)

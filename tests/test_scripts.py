@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
+from torchrl_cebp.training.config import compose_config
 from hydra.core.hydra_config import HydraConfig
 from tensordict import TensorDict
 
@@ -43,12 +43,11 @@ def test_run_comparison_queues_one_valid_run_per_stage_and_seed():
     assert set(stages.values()) == {3} and Counter(seeds) == {f"seed={s}": len(stages) for s in range(3)}
     assert len(agents) == 2 and all("seed=0" in run for run in agents)
     folders, epochs = {}, {}
-    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
-        for run in runs:
-            cfg = compose("config", overrides=run, return_hydra_config=True)
-            validate_config(cfg)  # every stage and sampler exists, every value is allowed
-            HydraConfig.instance().set_config(cfg)  # the folder's name reads hydra:runtime.choices
-            folders[" ".join(run)], epochs[" ".join(run)] = cfg.hydra.run.dir, cfg.epochs
+    for run in runs:
+        cfg = compose_config(*run, return_hydra_config=True)
+        validate_config(cfg)  # every stage and sampler exists, every value is allowed
+        HydraConfig.instance().set_config(cfg)  # the folder's name reads hydra:runtime.choices
+        folders[" ".join(run)], epochs[" ".join(run)] = cfg.hydra.run.dir, cfg.epochs
     stage_folders = [folders[" ".join(run)] for run in stage_runs]
     # A stage that differs from another by a sampler value alone must name its own folder, or it resumes the other's.
     assert len(set(stage_folders)) == len(stage_runs), Counter(stage_folders).most_common(1)
@@ -230,8 +229,7 @@ def test_the_sim2real_training_script_resumes_the_shipped_policys_run_with_its_s
     out = subprocess.run(["bash", "scripts/run_sim2real_training.sh"], cwd=REPO, capture_output=True, text=True,
                          check=True, env={**os.environ, "PYTHON": "echo"})
     overrides = out.stdout.split()[1:]
-    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
-        cfg = compose("config", overrides=overrides)
+    cfg = compose_config(*overrides)
     validate_config(cfg)
     assert cfg.replay.capacity_per == "total" and cfg.resume and cfg.workers == 8
 

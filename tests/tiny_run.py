@@ -3,7 +3,8 @@ import csv
 import shutil
 from pathlib import Path
 
-from hydra import compose, initialize_config_dir
+
+from torchrl_cebp.training.config import compose_config
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = [
@@ -20,9 +21,8 @@ TINY_RUN = ("sampler=her", "env=push")
 
 
 def config(*overrides: str):
-    """The composed ``conf/config.yaml`` with :data:`TINY`, then ``overrides``."""
-    with initialize_config_dir(str(REPO / "conf"), version_base="1.3"):
-        return compose("config", overrides=[*TINY, *overrides])
+    """The composed ``torchrl_cebp/conf/config.yaml`` with :data:`TINY`, then ``overrides``."""
+    return compose_config(*TINY, *overrides)
 
 
 def rows(csv_path: Path) -> list[dict[str, str]]:

@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+import torchrl_cebp
+
 from torchrl_cebp.agents.shipped import SHIPPED_AGENTS, shipped_agent
 from torchrl_cebp.training.checkpoint import UnreadableFileError, read_policy
 
@@ -166,6 +168,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         description="Success rate of a trained policy (a shipped agent, or your own run), and a video of a few episodes."
     )
+    parser.add_argument("--version", action="version", version=f"torchrl-cebp {torchrl_cebp.__version__}")
     parser.add_argument(
         "checkpoint", nargs="?", help="a run directory, its checkpoint.pt, or a policy file (policy.pt)"
     )

@@ -42,6 +42,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.ticker import MaxNLocator, NullLocator  # noqa: E402
 import numpy as np  # noqa: E402
 
+import torchrl_cebp  # noqa: E402
 from torchrl_cebp.stats import (  # noqa: E402
     iqm,
     probability_of_improvement,
@@ -1275,7 +1276,9 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
         description="Success curves of a sweep (IQM over seeds, 95% stratified-bootstrap band), and tables."
     )
-    parser.add_argument("root", help="sweep folder (e.g. runs/ or multirun/...)")
+    parser.add_argument("--version", action="version", version=f"torchrl-cebp {torchrl_cebp.__version__}")
+    parser.add_argument("root", nargs="?", default="runs",
+                        help="sweep folder, e.g. multirun/... (default: %(default)s, where training writes its runs)")
     parser.add_argument("--out", help="PNG path (default: <root>/<metric>.png)")
     parser.add_argument("--metric", default="test_success", help="CSV column to plot")
     parser.add_argument("--title", help="figure title (default: each panel is titled with its task)")

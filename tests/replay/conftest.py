@@ -5,9 +5,11 @@ import torch
 from omegaconf import OmegaConf
 from tensordict import TensorDict
 
+from torchrl_cebp.training.config import CONFIG_DIR
+
 T = 50
 # The released code's gripper box for Push, as the env config states it.
-PUSH_WORKSPACE = tuple(map(tuple, OmegaConf.load(Path(__file__).parents[2] / "conf/env/push.yaml").gripper_workspace))
+PUSH_WORKSPACE = tuple(map(tuple, OmegaConf.load(CONFIG_DIR / "env" / "push.yaml").gripper_workspace))
 
 
 def sparse_reward(achieved_goal: torch.Tensor, desired_goal: torch.Tensor) -> torch.Tensor:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from tensordict import NonTensorData, TensorDict
+from tensordict import NonTensorData
 from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
 from tests.modules import load_module

@@ -257,8 +257,12 @@ def test_cper_refuses_a_non_finite_touch_in_a_valid_step_and_ignores_one_in_the_
 
 
 def mep_probabilities(scores):
-    """The paper code's draw (HER_force's ``entropy`` mode): dense ranks from 0, plus 0.001, to the power 1/1.01."""
-    return (rankdata(scores, method="dense") - 1 + 0.001) ** (1 / 1.01)
+    """The paper code's draw (HER_force's ``entropy`` mode): dense ranks from 0, plus 0.001, to the power 1/1.01.
+
+    One trajectory scored in two batches differs in its last bits (here 4.5e-13 on 750): rounded to 1e-6, far above
+    that noise and far below the gaps between these tests' distinct trajectories, it gets one rank, as MEP gives it.
+    """
+    return (rankdata(np.round(scores, 6), method="dense") - 1 + 0.001) ** (1 / 1.01)
 
 
 def test_mep_ranks_rare_trajectories_higher(either_storage):
@@ -373,6 +377,30 @@ def test_mep_ranks_after_writes_are_those_of_a_whole_rerank():
     assert sampler.n_episodes == 12
     scores = sampler.state_dict()["scores"].numpy()
     assert torch.allclose(sampler.priorities(), torch.from_numpy(mep_probabilities(scores)))
+
+
+def test_mep_gives_one_trajectory_one_rank_whichever_batch_brought_it():
+    sampler = MEPSampler(seed=0)
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(20 * T), sampler=sampler, dim_extend=0, batch_size=16)
+    rb.extend(hand_made(8))
+    sampler.refit(rb.storage)
+    batch = hand_made(8, seed=5)  # rows 8-15, its row 3 (row 11) is also written alone (row 16)
+    rb.extend(batch)
+    rb.extend(batch[3:4])
+    priorities = sampler.priorities()
+    assert priorities[11] == priorities[16]
+    # As a CPU whose BLAS sums the batch in another order scores it: one trajectory's score a few ulps apart.
+    state = sampler.state_dict()
+    state["scores"][16] = float(np.nextafter(np.nextafter(state["scores"][11].item(), np.inf), np.inf))
+    rescored = MEPSampler(seed=0)
+    rescored.load_state_dict(state)
+    rescored.write_priorities(torch.tensor([0]), rb.storage.get(torch.tensor([0])))  # ranks the buffer again
+    assert torch.equal(rescored.priorities(), priorities)
+    # Scores that differ beyond float noise keep their own ranks.
+    state["scores"][16] = state["scores"][11] * (1 + 1e-6)
+    rescored.load_state_dict(state)
+    rescored.write_priorities(torch.tensor([0]), rb.storage.get(torch.tensor([0])))
+    assert rescored.priorities()[16] > rescored.priorities()[11]
 
 
 def test_per_new_transitions_at_max_priority_then_td_error():

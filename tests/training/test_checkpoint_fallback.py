@@ -7,7 +7,6 @@ import sys
 
 import hydra
 import pytest
-import torch
 
 from tests.tiny_run import REPO, TINY, TINY_RUN, config, copy_run, rows
 from torchrl_cebp.training import train

@@ -15,7 +15,7 @@ from tests.tiny_run import REPO, TINY, TINY_RUN, config, copy_run, rows
 from torchrl_cebp.replay import HindsightRelabel
 from torchrl_cebp.training import ConfigError, load_checkpoint, load_policy, train, validate_config
 from torchrl_cebp.replay.samplers import PerWorkerSampler
-from torchrl_cebp.training.config import check_same_run, env_label, warn_if_bf16_is_emulated
+from torchrl_cebp.training.config import CONFIG_DIR, check_same_run, env_label, warn_if_bf16_is_emulated
 from torchrl_cebp.training.builders import (
     TaskDims, derive_seed, episode_steps, make_agent, make_env, make_replay, make_sampler, make_training_collector,
     replay_capacity, worker_share,
@@ -250,7 +250,7 @@ def test_released_robot_trains_and_names_its_run_folder(tmp_path, env):
     assert policy(td)["action"].shape == (8 if env == "pick_place_released" else 7,)
     touch = "-touchobs" if cfg.env.touch_in_observation else ""
     assert env_label(cfg.env) == f"{cfg.env.task}-extended-joint-tableblind{touch}"
-    assert "runs/${env_label:${env}}/" in (REPO / "conf" / "config.yaml").read_text()
+    assert "runs/${env_label:${env}}/" in (CONFIG_DIR / "config.yaml").read_text()
 
 
 def test_capacity_below_one_cycle_and_bad_cebp_parameters_are_named_before_any_env_starts(tmp_path):
@@ -516,7 +516,7 @@ def test_a_checkpoint_from_before_capacity_per_resumes_with_the_shared_capacity_
         check_same_run(new, config("+comparison=push_standard"))
 
 
-@pytest.mark.parametrize("comparison", sorted(path.stem for path in (REPO / "conf" / "comparison").glob("*.yaml")))
+@pytest.mark.parametrize("comparison", sorted(path.stem for path in (CONFIG_DIR / "comparison").glob("*.yaml")))
 def test_the_comparisons_keep_the_shared_capacity_their_runs_began_with(comparison):
     # Slide's 50-epoch stage has no runs yet, and would fill a worker's 1/8 from epoch 25.
     expected = "worker" if comparison == "slide" else "total"

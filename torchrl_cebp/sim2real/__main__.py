@@ -29,6 +29,7 @@ from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torchrl.envs.utils import step_mdp
 
+import torchrl_cebp
 from torchrl_cebp.sim2real.calibration import TableCalibration
 from torchrl_cebp.sim2real.camera import CameraLost, FrameSource, ImageFolderCamera, OpenCVCamera
 from torchrl_cebp.sim2real.perception import CubeLocator, PerceptionStatus, draw_perception
@@ -108,6 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Options are written key=value (as in the examples) or --key value.\n\n" + __doc__.split("\n\n", 1)[1],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--version", action="version", version=f"torchrl-cebp {torchrl_cebp.__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (summary, options, defaults) in _COMMANDS.items():
         command = commands.add_parser(name, help=summary, description=summary)

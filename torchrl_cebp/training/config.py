@@ -1,4 +1,5 @@
-"""Checks of the training config that Hydra's own (group choices, known keys) leaves out."""
+"""The training config: where its files are, how to compose it, and the checks Hydra's own (group choices, known
+keys) leaves out."""
 
 from __future__ import annotations
 
@@ -6,8 +7,10 @@ import math
 import warnings
 from dataclasses import asdict
 from numbers import Real
+from pathlib import Path
 
 import torch
+from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig, OmegaConf
 
 from torchrl_cebp.envs import ALL_TASKS, CONTROLS, FRANKA_TASK, GOAL_SPACES, RobotOptions
@@ -15,6 +18,8 @@ from torchrl_cebp.replay.her import STRATEGIES
 from torchrl_cebp.training.builders import episode_steps, episodes_per_cycle
 from torchrl_cebp.training.metrics import LOGGERS
 
+# The Hydra configs (config.yaml and its groups), shipped inside the package so that an installed copy trains.
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "conf"
 DEVICES = ("auto", "cpu", "cuda")
 PRECISIONS = ("fp32", "bf16")
 CAPACITY_PER = ("worker", "total")
@@ -96,6 +101,24 @@ def temperature_label(sampler: str, temperature: float | None = None) -> str:
 
 if not OmegaConf.has_resolver("temperature_label"):
     OmegaConf.register_new_resolver("temperature_label", temperature_label)
+
+
+def compose_config(*overrides: str, return_hydra_config: bool = False) -> DictConfig:
+    """The training config of :data:`CONFIG_DIR` with Hydra ``overrides``, as ``train.py`` composes it.
+
+    For :func:`~torchrl_cebp.training.train` outside the command line: every key has its default.
+
+    Args:
+        *overrides (str): Hydra overrides, e.g. ``"sampler=cebp"``, ``"+comparison=push_standard"``.
+        return_hydra_config (bool, optional): keep the ``hydra`` node (run folders, sweeps). Defaults to ``False``.
+
+    Example:
+        >>> cfg = compose_config("sampler=cebp", "env=pick_place", "preset=quick")
+        >>> cfg.sampler.temperature, cfg.epochs, cfg.env.task
+        (0.01, 5, 'pick_place')
+    """
+    with initialize_config_dir(str(CONFIG_DIR), version_base="1.3"):
+        return compose("config", overrides=list(overrides), return_hydra_config=return_hydra_config)
 
 
 class ConfigError(ValueError):

@@ -48,9 +48,9 @@ def make_logger(kind: str, run_dir: str | Path) -> Logger | None:
     return get_logger(kind, logger_name=str(run_dir / "logs"), experiment_name=run_dir.name, **extra)
 
 
-# What a run executes: the package, its configs and its entry point. Edits anywhere else (the docs, or the result
+# What a run executes: the package (its configs included) and its entry point. Edits anywhere else (the docs, or the result
 # rows that scripts/sync_results.sh commits while a sweep runs) leave a row's code clean.
-RUN_SOURCES = ("torchrl_cebp", "conf", "train.py", "pyproject.toml")
+RUN_SOURCES = ("torchrl_cebp", "train.py", "pyproject.toml")
 
 
 @functools.cache

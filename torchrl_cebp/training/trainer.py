@@ -51,6 +51,7 @@ from torchrl_cebp.training.collection import EpisodeBatches
 from torchrl_cebp.training.config import ConfigError, resolve_device, validate_config, warn_if_bf16_is_emulated
 from torchrl_cebp.training.evaluation import evaluate_success_rate
 from torchrl_cebp.training.metrics import EpochLog, ExplorationLog
+from torchrl_cebp.training.run_lock import RunFolderLock
 
 # The streams derive_seed(seed, epoch, stream) names: each epoch restarts them, so a resumed run repeats.
 COLLECTION_STREAM, TEST_STREAM = 0, 1
@@ -128,13 +129,9 @@ class Learner:
             :meth:`epoch_means`. Defaults to ``None`` (not measured).
 
     Example:
-        >>> from pathlib import Path
-        >>> from hydra import compose, initialize_config_dir
-        >>> import torchrl_cebp
         >>> from torchrl_cebp.training.builders import make_optimizer
-        >>> conf = Path(torchrl_cebp.__file__).resolve().parents[1] / "conf"
-        >>> with initialize_config_dir(str(conf), version_base="1.3"):
-        ...     cfg = compose("config", overrides=["batch_size=8", "replay.capacity=5000", "agent.hidden=[32]"])
+        >>> from torchrl_cebp.training.config import compose_config
+        >>> cfg = compose_config("batch_size=8", "replay.capacity=5000", "agent.hidden=[32]")
         >>> env = make_env(cfg, 2)
         >>> agent = make_agent(cfg, TaskDims.of(env))
         >>> sampler = make_sampler(cfg)
@@ -270,7 +267,8 @@ def prepare_run_dir(cfg: DictConfig, run_dir: str | Path) -> tuple[Path, bool]:
 
 
 def train(cfg: DictConfig, run_dir: str | Path) -> Path:
-    """Trains DDPG+HER as configured by ``cfg`` (see ``conf/config.yaml``); returns the CSV path.
+    """Trains DDPG+HER as configured by ``cfg`` (``conf/config.yaml``, composed with
+    :func:`~torchrl_cebp.training.config.compose_config`); returns the CSV path.
 
     ``run_dir`` receives ``progress.csv`` (one row per epoch), ``checkpoint.pt`` (the previous epoch's
     beside it) and ``policy.pt`` (after each epoch), and ``best_policy.pt`` (the epoch with the highest test
@@ -284,12 +282,19 @@ def train(cfg: DictConfig, run_dir: str | Path) -> Path:
     Raises:
         ConfigError: an invalid config, a checkpoint in ``run_dir`` without ``cfg.resume``, or a checkpoint of
             another run.
+        RunFolderInUseError: another process is training in ``run_dir`` (it holds the folder's
+            :class:`~torchrl_cebp.training.run_lock.RunFolderLock` for as long as it runs).
         UnreadableFileError: with ``cfg.resume``, neither checkpoint of ``run_dir`` loads.
     """
     validate_config(cfg)
+    sampler = make_sampler(cfg)  # here, so that a bad sampler argument fails before the run folder is made
+    with RunFolderLock(run_dir):  # before anything is written there: a second process on the folder is refused
+        return _train_in_locked_folder(cfg, run_dir, sampler)
+
+
+def _train_in_locked_folder(cfg: DictConfig, run_dir: str | Path, sampler: Sampler) -> Path:
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
-    sampler = make_sampler(cfg)  # here, so that a bad sampler argument fails before the envs start
     run_dir, resuming = prepare_run_dir(cfg, run_dir)
     device = resolve_device(cfg.device)
     warn_if_bf16_is_emulated(cfg.precision, device)

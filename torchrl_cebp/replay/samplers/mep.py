@@ -15,17 +15,46 @@ from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, checked, e
 
 # The paper's code adds it to the dense rank (from 0), so that the most common trajectories stay drawable.
 RANK_OFFSET = 0.001
+# Scores within this share of their raw magnitude tie in the dense rank. A trajectory's -log density differs in
+# its last bits with the batch that scored it (BLAS kernels sum in a batch-dependent order; seen: 5.8e-11 on 2.6e5,
+# 2e-16 relative, on an AVX-512 CPU), so an exact rank would give one trajectory two ranks, by which write brought it.
+# 1e-9 leaves seven orders of magnitude above that noise, and is far below any density difference worth a rank.
+SCORE_RTOL = 1e-9
 # What score_samples reads of a fitted BayesianGaussianMixture (sklearn's public fitted state), saved by name.
 MIXTURE_STATE = ("weight_concentration_", "mean_precision_", "means_", "degrees_of_freedom_",
                  "covariances_", "precisions_cholesky_")
+
+
+def dense_ranks(scores: np.ndarray, rtol: float = 0.0, shift: float = 0.0) -> np.ndarray:
+    """Dense ranks from 0 of ``scores``; a score within ``rtol`` of the next lower one, relative to its raw value
+    ``score + shift`` (at least 1), shares that one's rank.
+
+    The ranks are a function of the set of scores alone, not of their order or of which write brought them.
+
+    Args:
+        scores (np.ndarray): ``[n]`` scores.
+        rtol (float, optional): the relative gap between sorted neighbours that is still a tie. Defaults to ``0.0``.
+        shift (float, optional): what was subtracted from the raw scores, whose magnitude sets their float noise.
+            Defaults to ``0.0``.
+
+    Example:
+        >>> dense_ranks(np.array([3.0, 1.0, 1.0 + 1e-15, 2.0]), rtol=1e-12).tolist()
+        [2, 0, 0, 1]
+    """
+    order = np.argsort(scores, kind="stable")
+    ordered = scores[order]
+    tolerance = rtol * np.maximum(np.abs(ordered[1:] + shift), 1.0)
+    ranks = np.empty(len(scores), dtype=np.int64)
+    ranks[order] = np.concatenate([[0], np.cumsum(np.diff(ordered) > tolerance)])
+    return ranks
 
 
 class MEPSampler(EpisodePrioritySampler):
     """Rare achieved-goal trajectories first: rank of the -log density under a Bayesian GMM.
 
     :meth:`refit` fits a :class:`sklearn.mixture.BayesianGaussianMixture` on the buffer's achieved-goal trajectories;
-    every write ranks the whole buffer again (the formula is in ``docs/samplers.md``). Until the first refit every
-    rank is 0: uniform draws. No importance-sampling weights.
+    every write ranks the whole buffer again (the formula is on the :doc:`samplers page </samplers>`). Until the
+    first refit every rank is 0: uniform draws. No importance-sampling weights.
 
     Args:
         n_components (int, optional): mixture components. Defaults to ``3``, MEP's.
@@ -75,6 +104,7 @@ class MEPSampler(EpisodePrioritySampler):
         self._levels = torch.zeros(0, dtype=torch.float64)  # the priority of each rank
 
     def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        """The entries read: the object's position before and after each step, ``(3,)`` each."""
         return {self.position_key: (3,), self.next_position_key: (3,)}
 
     def _new_mixture(self, covariance_prior: np.ndarray | None = None) -> BayesianGaussianMixture:
@@ -95,11 +125,14 @@ class MEPSampler(EpisodePrioritySampler):
         return torch.from_numpy(-self._mixture.score_samples(trajectories))
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Rank 0's priority for each episode, ``[n]``: every episode's until the first :meth:`refit`."""
         # Rank 0's, every episode's until the first refit; after it, write_priorities ranks the buffer again.
         return self._rank_priorities(torch.zeros(episodes.shape[0], dtype=torch.long))
 
     def write_priorities(self, rows: torch.Tensor, episodes: TensorDictBase,
                          lengths: torch.Tensor | None = None) -> None:
+        """Scores the written ``episodes`` at ``rows``; once the mixture is fitted, scores their trajectories under it
+        and ranks every stored episode again."""
         if lengths is None:
             lengths = episode_lengths(episodes, self.end_key)
         n_before = self.n_episodes
@@ -117,8 +150,8 @@ class MEPSampler(EpisodePrioritySampler):
     def _rank_stored(self) -> None:
         """Dense ranks from 0 of every stored episode's score, as priorities; only those that changed are set."""
         n = self.n_episodes
-        # numpy's unique sorts some five times faster than torch's on one thread; the ranks are the same.
-        priority = self._rank_priorities(torch.from_numpy(np.unique(self._scores[:n].numpy(), return_inverse=True)[1]))
+        ranks = dense_ranks(self._scores[:n].numpy(), rtol=SCORE_RTOL, shift=self._lowest_fit_score)
+        priority = self._rank_priorities(torch.from_numpy(ranks))
         changed = (priority != self._priorities[:n]).nonzero().squeeze(-1)
         self.set_priorities(changed, priority.index_select(0, changed))
 
@@ -147,6 +180,8 @@ class MEPSampler(EpisodePrioritySampler):
         self._rank_stored()
 
     def state_dict(self) -> dict[str, Any]:
+        """The base state, each row's score, the refit count and the fitted mixture's parameters, as tensors and
+        numbers that ``torch.load(weights_only=True)`` reads."""
         state = super().state_dict()
         state.update(scores=self._scores.clone(), lowest_fit_score=self._lowest_fit_score, n_refits=self._n_refits)
         if self._mixture is not None:
@@ -155,6 +190,11 @@ class MEPSampler(EpisodePrioritySampler):
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Restores a :meth:`state_dict`, the fitted mixture included.
+
+        Raises:
+            ValueError: a state without per-episode scores, from an older MEPSampler.
+        """
         if "scores" not in state_dict:
             raise ValueError("this MEP state is from a version of MEPSampler that did not rank the whole buffer on "
                              "every write; it holds no per-episode scores to rank: start the run again")
