@@ -17,18 +17,22 @@ from torchrl_cebp.training.checkpoint import POLICY_NAME, UnreadableFileError
 
 
 def plain_gymnasium_success_rate(policy, make_env, seeds) -> float:
-    """The success rate of ``policy`` over one gymnasium episode per seed, stepped by hand (no TorchRL env)."""
-    successes = []
-    for seed in seeds:
-        env = make_env()
-        obs, _ = env.reset(seed=seed)
-        for _ in range(env.max_episode_steps):
-            td = TensorDict({key: torch.as_tensor(obs[key], dtype=torch.float32) for key in ("observation", "desired_goal")})
-            with torch.no_grad():
-                action = policy(td)["action"].numpy()
-            obs, _, _, _, info = env.step(action)
-        successes.append(float(info["is_success"]))
-    return float(np.mean(successes))
+    """The success rate of ``policy`` over one gymnasium episode per seed, stepped by hand (no TorchRL env).
+
+    The episodes run side by side and the policy acts on all of them in one batch, as the command's batched env has it
+    act: a network's forward over one row is another BLAS kernel than over a batch, whose actions differ in their last
+    bits (by CPU), and the contacts can turn that into another outcome.
+    """
+    envs = [make_env() for _ in seeds]
+    observations = [env.reset(seed=seed)[0] for env, seed in zip(envs, seeds)]
+    for _ in range(envs[0].max_episode_steps):
+        td = TensorDict({key: torch.as_tensor(np.stack([obs[key] for obs in observations]), dtype=torch.float32)
+                         for key in ("observation", "desired_goal")}, [len(envs)])
+        with torch.no_grad():
+            actions = policy(td)["action"].numpy()
+        steps = [env.step(action) for env, action in zip(envs, actions)]
+        observations = [step[0] for step in steps]
+    return float(np.mean([float(step[4]["is_success"]) for step in steps]))
 
 
 def test_the_command_prints_the_success_rate_a_plain_loop_measures(capsys):

@@ -58,8 +58,14 @@ def test_the_installed_commands_train_sweep_evaluate_and_plot_from_an_empty_fold
     for command in ("torchrl-cebp-train", "torchrl-cebp-evaluate", "torchrl-cebp-plot", "torchrl-cebp-sim2real"):
         assert _run(installed / command, "--version", cwd=tmp_path).stdout.strip() == "torchrl-cebp 0.1.0"
     quick = ("preset=quick", "epochs=1", "cycles_per_epoch=2")
-    trained = _run(installed / "python", "-m", "torchrl_cebp.train", *quick, "hydra.run.dir=runs/single", cwd=tmp_path)
+    # A sampler config of the user's own, through Hydra's search path, as docs/training.md shows it.
+    (tmp_path / "my_conf" / "sampler").mkdir(parents=True)
+    (tmp_path / "my_conf" / "sampler" / "my_cebp.yaml").write_text(
+        "_target_: torchrl_cebp.replay.samplers.CEBPSampler\nscale: 100.0\ntemperature: 0.1\nbeta: 0.5\n")
+    trained = _run(installed / "python", "-m", "torchrl_cebp.train", *quick, "hydra.run.dir=runs/single",
+                   f"hydra.searchpath=[file://{tmp_path / 'my_conf'}]", "sampler=my_cebp", cwd=tmp_path)
     assert "per-epoch results: " in trained.stdout and (tmp_path / "runs/single/progress.csv").is_file()
+    assert "sampler=my_cebp" in (tmp_path / "runs/single/.hydra/overrides.yaml").read_text()
     _run(installed / "torchrl-cebp-train", "-m", "sampler=her,cebp", *quick, cwd=tmp_path)
     for sampler in ("her", "cebp"):
         assert (tmp_path / f"runs/push-standard/{sampler}/quick/seed0/progress.csv").is_file()
