@@ -21,7 +21,7 @@ from hydra.errors import CompactHydraException
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from torchrl_cebp.training import RunFolderInUseError, RunFolderLock, train
+from torchrl_cebp.training import ConfigError, RunFolderInUseError, RunFolderLock, train, validate_config
 from torchrl_cebp.training.checkpoint import UnreadableFileError
 
 
@@ -52,10 +52,11 @@ def train_job(cfg: DictConfig) -> None:
     """Trains one run into Hydra's output folder (one job of a sweep with ``-m``)."""
     run_dir = HydraConfig.get().runtime.output_dir
     try:
+        validate_config(cfg)  # a wrong value is named before anything is written (train checks it again)
         with RunFolderLock(run_dir):
             save_hydra_config(cfg, run_dir)
             csv_path = train(cfg, run_dir)
-    except (RunFolderInUseError, UnreadableFileError) as error:  # a message, not a stack trace
+    except (ConfigError, RunFolderInUseError, UnreadableFileError) as error:  # a message, not a stack trace
         if HydraConfig.get().mode == RunMode.MULTIRUN:
             print(f"refused: {error}", file=sys.stderr, flush=True)
             raise RunRefusedError(str(error)) from None

@@ -55,7 +55,7 @@ class RobotOptions:
 
     @property
     def label(self) -> str:
-        """A short name for folders: empty for the defaults, else e.g. ``joint-tableblind-touchobs``."""
+        """The robot's short name for folders, empty for the defaults, else e.g. ``joint-tableblind-touchobs``."""
         parts = [self.control] if self.control != "mocap" else []
         parts += ["tableblind"] if self.touch_ignores_table else []
         parts += ["touchobs"] if self.touch_in_observation else []

@@ -25,8 +25,8 @@ class HindsightRelabel(SampleUnit):
     twice: as its ``sample_unit`` (it sees the drawn ``(episode, step)`` pairs and the storage) and as its
     ``collate_fn`` (it writes the new goals and rewards into the batch, before the transforms). Any sampler works,
     ours or TorchRL's. A coin of probability ``future_p`` per transition decides whether to relabel; the new goal is
-    an achieved goal of the episode's valid steps, chosen by ``strategy`` (``docs/replay.md`` lists them, and compares
-    this with :class:`torchrl.data.HERReplayBuffer`). Coins and goals draw from the buffer's generator.
+    an achieved goal of the episode's valid steps, chosen by ``strategy`` (the :doc:`replay page </replay>` lists them,
+    and compares this with :class:`torchrl.data.HERReplayBuffer`). Coins and goals draw from the buffer's generator.
 
     Args:
         reward_fn (Callable[[torch.Tensor, torch.Tensor], torch.Tensor]): vectorised sparse reward,
@@ -151,6 +151,23 @@ class HindsightRelabel(SampleUnit):
     def expand(
         self, index: torch.Tensor | tuple, info: dict[str, Any], storage: Storage
     ) -> tuple[torch.Tensor | tuple, dict[str, Any]]:
+        """The buffer's ``sample_unit`` hook: draws each drawn transition's coin and candidate goal, which
+        :meth:`collate` then writes into the batch.
+
+        Args:
+            index (torch.Tensor or tuple): the sampler's draw, ``(rows, steps)`` or ``[B, 2]``.
+            info (dict): the sampler's info, to which the relabelled flags are added under ``relabelled_key``.
+            storage (Storage): the buffer's episode storage (``ndim=2``).
+
+        Returns:
+            ``(index, info)``: the transitions to read and ``info``. With ``strategy="past"`` each transition read is
+            a step ``[0, t)`` of the drawn one's episode (step 0 for ``t = 0``), and the drawn step ``t`` gives the
+            goal.
+
+        Raises:
+            RuntimeError: the previous draw never reached :meth:`collate`: the buffer lacks this instance as its
+                ``collate_fn``.
+        """
         if getattr(self._pending, "draw", None) is not None:
             # The buffer read no batch after the previous draw. Once a batch has reached collate(), the buffer is
             # known to call it, so that draw was interrupted (an error or Ctrl-C while the batch was read): drop it.

@@ -100,6 +100,24 @@ class _EpisodeRows:
         self._short_rows.copy_(torch.count_nonzero(self._lengths < row_length))
 
     def set(self, cursor: Any, data: Any, *, set_cursor: bool = True) -> None:
+        """Writes whole episodes into the rows ``cursor``, as TorchRL's storage does, and keeps each row's valid length
+        and write count.
+
+        Every check runs before any row changes, so that a refused write stores nothing (and rewinds the buffer's
+        writer): the data must be ``[n, T]`` episodes of the storage's row length with one end flag each at most,
+        hold every stored entry and no other, and pass the buffer's sampler's ``check_episodes``. Data that is not a
+        tensordict goes to TorchRL's storage unchecked.
+
+        Args:
+            cursor (Any): the rows, as the buffer's writer gives them.
+            data (Any): the episodes.
+            set_cursor (bool, optional): TorchRL's flag, passed on. Defaults to ``True``.
+
+        Raises:
+            ValueError: rows that are not single episodes of the storage's length, or that the sampler refuses.
+            KeyError: a write that lacks a stored entry or adds one, or lacks an entry the sampler reads.
+            TypeError: a first write that holds entries other than tensors.
+        """
         if not isinstance(data, TensorDictBase):
             return self._store(cursor, data, set_cursor, whole=False)
         known, counting = self._lengths is not None, False
@@ -188,6 +206,12 @@ class _EpisodeRows:
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Loads a :meth:`state_dict`, or a TorchRL storage's state (which holds every row), then counts every row
+        written once, so that a sampler that meets the storage again scores it.
+
+        Raises:
+            ValueError: the state holds another number of episode rows: build the storage with its capacity.
+        """
         if state_dict.get("initialized"):
             saved = TensorDict().load_state_dict(state_dict[_upstream.STORAGE_STATE_KEY], strict=False)
             # Our states keep the filled rows and the row count; TorchRL's (and older ones) every row.
@@ -208,6 +232,11 @@ class _EpisodeRows:
         self._after_load()
 
     def loads(self, path: Any) -> None:
+        """Loads what TorchRL's ``dumps`` wrote into ``path``, as :meth:`load_state_dict` loads a state.
+
+        Raises:
+            ValueError: the dump holds another number of episode rows: build the storage with its capacity.
+        """
         saved_shape = TensorDict.load_memmap(path).shape  # memory-mapped: reading the shape loads no data
         if len(saved_shape) >= 2:
             self._adopt_saved_rows(saved_shape[0], saved_shape[1])
@@ -373,6 +402,12 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         return self._laid_out
 
     def get(self, index: Any) -> Any:
+        """Reads stored transitions or rows: ``(rows, steps)`` tensors with one gather per dtype block, a slice of
+        consecutive rows as views of the blocks, and any other index as TorchRL's storage reads it.
+
+        Raises:
+            IndexError: a step outside the rows' ``T`` steps (a negative one counts from the end).
+        """
         if self.initialized and _is_pair_index(index):
             _, blocks, _, plan, n_nodes, row_length = self._layout()
             low, high = map(int, torch.aminmax(index[1])) if index[1].numel() else (0, 0)  # ints: compared faster

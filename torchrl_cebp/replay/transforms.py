@@ -16,8 +16,8 @@ def replay_cat_tensors(
     """TorchRL's :class:`~torchrl.envs.CatTensors` as a replay buffer's ``transform``: on the root and on ``"next"``.
 
     Concatenate the observation and the goal here, not in the env: the buffer runs its transform after HER wrote
-    the new goal, and overwrites a stale vector the env stored (``docs/replay.md``). It is two ``CatTensors`` with
-    the same arguments, building on both levels the vector the env's transform would.
+    the new goal, and overwrites a stale vector the env stored (see the :doc:`replay page </replay>`). It is two
+    ``CatTensors`` with the same arguments, building on both levels the vector the env's transform would.
 
     Args:
         in_keys (sequence of NestedKey): the entries to concatenate, in this order.

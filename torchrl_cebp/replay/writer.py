@@ -25,7 +25,7 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
     round-robin. Frames continue the episode of their ``traj_key`` (else of their lane) only if their first state is its
     last next-state, so an episode cut by a reset is dropped, never merged. ``rb.extend(batch)`` returns each frame's
     flat transition index ``row * max_episode_steps + step``, -1 while its episode has not ended; and ``rb.empty()``
-    drops the waiting frames too. See ``docs/replay.md`` for the layouts it takes.
+    drops the waiting frames too. The :doc:`replay page </replay>` shows the layouts it takes.
 
     Args:
         max_episode_steps (int): the storage's row length, the longest episode (``env.max_episode_steps``).
@@ -58,9 +58,25 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
         self._partial: dict[int, TensorDictBase] = {}
 
     def add(self, data: TensorDictBase) -> torch.Tensor:
+        """Writes one frame, as :meth:`extend` writes a batch: its flat index, or -1 while its episode has not ended."""
         return self.extend(data.unsqueeze(0)).squeeze(0)
 
     def extend(self, data: TensorDictBase) -> torch.Tensor:
+        """Writes the episodes that ``data``'s frames complete, padded to ``max_episode_steps``; the other frames wait.
+
+        A refused batch changes nothing: neither the waiting frames nor the next row.
+
+        Args:
+            data (TensorDictBase): frames whose last dimension is time and whose leading ones are env lanes.
+
+        Returns:
+            Each frame's flat transition index ``row * max_episode_steps + step``, shaped as ``data``; -1 while its
+            episode has not ended.
+
+        Raises:
+            KeyError: the frames lack ``end_key``.
+            ValueError: an episode runs longer than ``max_episode_steps``, or time is not the last dimension.
+        """
         # A refused batch changes nothing: neither the waiting frames nor the next row (the storage refuses a write
         # before storing any row, after TorchRL's writer has moved its cursor).
         partial, position = dict(self._partial), _upstream.writer_position(self)
@@ -125,17 +141,21 @@ class EpisodeWriter(TensorDictRoundRobinWriter):
         self._partial.clear()
 
     def state_dict(self) -> dict[str, Any]:
+        """TorchRL's writer state and the frames waiting for their episode's end (``"partial_episodes"``)."""
         return {**super().state_dict(), "partial_episodes": self._partial_state()}
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Loads a :meth:`state_dict`, or a TorchRL round-robin writer's state (then no frames wait)."""
         super().load_state_dict(state_dict)
         self._load_partial_state(state_dict.get("partial_episodes", {}))  # none in a RoundRobinWriter's state
 
     def dumps(self, path: str | Path) -> None:
+        """Writes TorchRL's writer files into the folder ``path``, and the waiting frames beside them."""
         super().dumps(path)
         torch.save(self._partial_state(), Path(path) / PARTIAL_EPISODES_FILE)
 
     def loads(self, path: str | Path) -> None:
+        """Loads what :meth:`dumps` wrote into ``path``."""
         super().loads(path)
         self._load_partial_state(torch.load(Path(path) / PARTIAL_EPISODES_FILE, weights_only=True))
 

@@ -482,6 +482,8 @@ class CubePerception(Transform):
         return self.locator.locate(np.ascontiguousarray(image))
 
     def _call(self, next_tensordict: TensorDictBase) -> TensorDictBase:
+        """Perceives each image under ``in_key`` of ``next_tensordict`` and writes the three entries into it: the
+        transform's work on every env step, and what calling it on a tensordict does."""
         pixels = next_tensordict.get(self.in_keys[0])
         batch_shape = pixels.shape[:-3]
         images = pixels.detach().cpu().numpy().reshape(-1, *pixels.shape[-3:])

@@ -212,6 +212,18 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
                              "sampler per buffer")
 
     def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
+        """Scores the episodes a write just stored, on the buffer's notice after each write.
+
+        Rows that another process wrote since the last look are scored too: their write counts changed.
+
+        Args:
+            index (torch.Tensor or int): the written rows: a write's ``[n * T, 2]`` index, or a 1-d index of rows.
+            storage (Storage): the buffer's episode storage, from which the priorities are computed.
+
+        Raises:
+            RuntimeError: no ``storage``.
+            ValueError: ``storage`` is not the one this sampler scores (one sampler per buffer), or not ``ndim=2``.
+        """
         if storage is None:
             raise RuntimeError(f"{type(self).__name__} computes priorities from the written episodes and "
                                "needs the storage: use it inside a replay buffer whose writer notifies it.")
@@ -337,6 +349,21 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
         return self._priorities.index_select(0, rows) / self._tree.query(0, self._tree.size)
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple, dict]:
+        """Draws ``batch_size`` episode rows by their priority, then a valid step of each.
+
+        The rows written since the last look, by any process, are scored first.
+
+        Args:
+            storage (Storage): the buffer's episode storage.
+            batch_size (int): the number of ``(row, step)`` pairs.
+
+        Returns:
+            ``((rows, steps), info)``, where ``info`` holds the drawn rows' IS weights (float32) under
+            ``"priority_weight"`` for a sampler that uses them (:meth:`importance_weights`), else nothing.
+
+        Raises:
+            RuntimeError: the storage is empty, or every stored episode has priority 0.
+        """
         self._catch_up(storage)
         if self._n_stored == 0:
             raise RuntimeError(EMPTY_STORAGE_ERROR)
@@ -353,12 +380,16 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
 
     # ---- state --------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
+        """The priorities, the number of rows written and any cumulative step weights, as tensors and numbers that
+        ``torch.load(weights_only=True)`` reads."""
         state = {"priorities": self.priorities(), "n_stored": self._n_stored}
         if self._cumulative_step_weights is not None:
             state["cumulative_step_weights"] = self._cumulative_step_weights.clone()
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Restores a :meth:`state_dict`, taken to match the rows of the storage the sampler meets next; rows written
+        after that are scored as usual."""
         # Older states also carry the valid lengths, which the storage keeps: they are left unread.
         priorities = self._priorities = state_dict["priorities"].to(torch.float64).clone()
         self._n_stored = int(state_dict["n_stored"])

@@ -38,6 +38,9 @@ class _ContactEnergySampler(EpisodePrioritySampler):
             raise ValueError(f"workspace={workspace!r}: expected ((min x, y, z), (max x, y, z)) or None")
 
     def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        """The entries read, with their per-step shapes: both pads' touch ``(2,)``, the object's position before and
+        after each step ``(3,)``, and the next observation (any width), unless ``next_observation_key`` is ``None``
+        (:class:`CEBPSampler`, which masks no workspace)."""
         keys = {self.touch_key: (2,), self.position_key: (3,), self.next_position_key: (3,)}
         if self.next_observation_key is not None:  # the gripper's position, for the workspace mask
             keys[self.next_observation_key] = (None,)
@@ -62,6 +65,15 @@ class _ContactEnergySampler(EpisodePrioritySampler):
         return ((gripper >= low) & (gripper <= high)).all(-1)
 
     def importance_weights(self, probabilities: torch.Tensor, n_episodes: int) -> torch.Tensor:
+        """IS weights ``(N p)^-beta`` of the drawn episodes, divided by the batch's largest.
+
+        As in the authors' code, all ones while fewer than 256 episodes are stored; the paper's form
+        (:class:`CEBPSampler`) weighs from the first episode.
+
+        Args:
+            probabilities (torch.Tensor): each drawn episode's probability ``p``.
+            n_episodes (int): the number of stored episodes ``N``.
+        """
         if n_episodes < self._warmup_episodes:
             return torch.ones_like(probabilities)
         return batch_normalised_weights(probabilities, n_episodes, self.beta)
@@ -76,7 +88,8 @@ def _corners(workspace: Workspace) -> tuple[torch.Tensor, ...]:
 class CEBPSampler(_ContactEnergySampler):
     """CEBP as in the paper's equations: episodes drawn by the sum over steps of a sigmoid of their contact energy.
 
-    The formulas of the three CEBP forms are in ``docs/samplers.md``. Only replay reads the touch, never the policy.
+    The formulas of the three CEBP forms are on the :doc:`samplers page </samplers>`. Only replay reads the touch,
+    never the policy.
 
     Args:
         scale (float, optional): the sigmoid's ``k``. Defaults to ``100.0``, the paper's.
@@ -114,6 +127,17 @@ class CEBPSampler(_ContactEnergySampler):
         self.beta = checked("CEBPSampler", "beta", beta)
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Each episode's sum over its valid steps of ``scale * sigmoid(temperature * c(t))``, where the contact
+        energy ``c(t)`` sums, up to step ``t``, both pads' touch times the length of the object's displacement.
+
+        Args:
+            episodes (TensorDictBase): ``[n, T]`` episodes holding the :meth:`episode_keys` entries.
+            valid (torch.Tensor): bool ``[n, T]``, the steps before each episode's end; padding adds nothing.
+
+        Returns:
+            float64 ``[n]`` priorities; with non-negative touch each valid step adds between ``scale / 2`` and
+            ``scale``.
+        """
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
         energy = torch.cumsum(self._touch(episodes, valid) * distance, dim=1)
         return (self.scale * torch.sigmoid(self.temperature * energy) * valid).sum(1)
@@ -149,13 +173,25 @@ class ReleasedCEBPSampler(_ContactEnergySampler):
         (True, True)
     """
 
-    beta = 1.0  # the code's, fixed
+    beta = 1.0  #: The IS exponent, fixed at the released code's 1.
 
     def __init__(self, *, k: float = 0.1, **keys: Any) -> None:
         super().__init__(**keys)
         self.k = checked("ReleasedCEBPSampler", "k", k, exclusive=True)
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Each episode's sum over its valid steps of ``|100 sigmoid(k x(t)) - 50|``, plus float32 eps.
+
+        ``x(t)`` is the contact energy up to step ``t`` (touch times the object's displacement, summed over steps and
+        over x, y, z; 0 while the gripper is outside ``workspace``) times the length of the step's displacement.
+
+        Args:
+            episodes (TensorDictBase): ``[n, T]`` episodes holding the :meth:`episode_keys` entries.
+            valid (torch.Tensor): bool ``[n, T]``, the steps before each episode's end; padding adds nothing.
+
+        Returns:
+            float64 ``[n]`` priorities, positive: an episode without contact stays drawable.
+        """
         displacement = self._displacement(episodes, valid)
         energy = torch.cumsum(displacement.sum(-1) * self._touch(episodes, valid), dim=1)  # xyz summed first: commutes
         x = energy * self._in_workspace(episodes) * torch.linalg.vector_norm(displacement, dim=-1)
@@ -193,6 +229,16 @@ class InitialCEBPSampler(_ContactEnergySampler):
         self.beta = checked("InitialCEBPSampler", "beta", beta)
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Each episode's sum over its valid steps of both pads' touch (0 while the gripper is outside ``workspace``)
+        times the length of the object's displacement, plus float32 eps: no sigmoid.
+
+        Args:
+            episodes (TensorDictBase): ``[n, T]`` episodes holding the :meth:`episode_keys` entries.
+            valid (torch.Tensor): bool ``[n, T]``, the steps before each episode's end; padding adds nothing.
+
+        Returns:
+            float64 ``[n]`` priorities; every episode without contact has eps, so those with contact dominate.
+        """
         distance = torch.linalg.vector_norm(self._displacement(episodes, valid), dim=-1)
         touch = self._touch(episodes, valid) * self._in_workspace(episodes)
         return (touch * distance).abs().sum(1) + FLOAT32_EPS

@@ -42,6 +42,7 @@ class CPERSampler(EpisodePrioritySampler):
         self.touch_key = touch_key
 
     def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        """The one entry read: both pads' touch, ``(2,)`` per step."""
         return {self.touch_key: (2,)}
 
     def check_episodes(self, episodes: TensorDictBase) -> None:
@@ -60,10 +61,20 @@ class CPERSampler(EpisodePrioritySampler):
         return touch
 
     def step_weights(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Each step's weight: ``lam`` once the episode's cumulative touch exceeds ``threshold``, else 1; 0 on padding.
+
+        Args:
+            episodes (TensorDictBase): ``[n, T]`` episodes holding the touch entry.
+            valid (torch.Tensor): bool ``[n, T]``, the steps before each episode's end.
+
+        Raises:
+            ValueError: a valid step's touch is NaN or infinite.
+        """
         rich = torch.cumsum(self._touch(episodes, valid), dim=1) > self.threshold
         return torch.where(rich, self.lam, 1.0) * valid
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """The sum of each episode's :meth:`step_weights`, ``[n]``."""
         return self.step_weights(episodes, valid).sum(1)
 
     def __repr__(self) -> str:

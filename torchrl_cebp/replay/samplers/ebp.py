@@ -15,7 +15,7 @@ STEP_SECONDS = 0.04  # 20 substeps of 2 ms: the Fetch control step
 class EBPSampler(EpisodePrioritySampler):
     """Episodes drawn by the object's trajectory energy, its clipped increases of potential and kinetic energy.
 
-    The formula is in ``docs/samplers.md``. No importance-sampling weights.
+    The formula is on the :doc:`samplers page </samplers>`. No importance-sampling weights.
 
     Args:
         clip_energy (float, optional): per-step clip (0.5 for PickAndPlace in the paper). Defaults to ``999.0``.
@@ -53,9 +53,21 @@ class EBPSampler(EpisodePrioritySampler):
         self.next_position_key = next_position_key
 
     def episode_keys(self) -> dict[NestedKey, tuple[int | None, ...]]:
+        """The entries read: the object's position before and after each step, ``(3,)`` each."""
         return {self.position_key: (3,), self.next_position_key: (3,)}
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Each episode's trajectory energy raised to ``1 / (temperature + 0.01)``, plus float32 eps.
+
+        The trajectory energy sums, over the valid steps, each step's increase of the object's energy, clipped to
+        ``[0, clip_energy]``: ``w_potential`` times its potential energy above its first height plus ``w_kinetic``
+        times its kinetic energy (mass 1, steps of 0.04 s). The eps keeps a buffer of motionless episodes drawable,
+        uniformly.
+
+        Args:
+            episodes (TensorDictBase): ``[n, T]`` episodes holding the :meth:`episode_keys` entries.
+            valid (torch.Tensor): bool ``[n, T]``, the steps before each episode's end; padding adds nothing.
+        """
         positions = episode_positions(episodes, self.position_key, self.next_position_key)
         height = positions[:, 1:, 2] - positions[:, :1, 2]
         velocity = positions.diff(dim=1) / STEP_SECONDS

@@ -24,8 +24,8 @@ class PERSampler(PrioritizedSampler):
 
     Priorities are per transition (the padding steps of episodes that ended early at 0); feed TD errors back with
     ``rb.update_tensordict_priority(batch)``. Beta grows linearly from ``beta`` to ``beta_end``, one step of
-    :meth:`beta_scheduler` per draw. The formula is in ``docs/samplers.md``; the state and dumps are TorchRL's
-    sampler's (:meth:`state_dict`, :meth:`dumps`).
+    :meth:`beta_scheduler` per draw. The formula is on the :doc:`samplers page </samplers>`; the state and dumps are
+    TorchRL's sampler's (:meth:`state_dict`, :meth:`dumps`).
 
     Args:
         capacity (int, optional): storage capacity in transitions, the buffer's. Defaults to ``1_000_000``.
@@ -71,6 +71,17 @@ class PERSampler(PrioritizedSampler):
         return self._beta_scheduler
 
     def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
+        """Gives the written transitions TorchRL's default priority (the largest so far), then keeps the padding
+        steps after an episode's end out of the draws.
+
+        Args:
+            index (torch.Tensor or int): the written transitions, as the buffer's writer gives them.
+            storage (Storage, optional): the buffer's storage; an episode storage (``ndim=2``) tells the padding.
+
+        Raises:
+            ValueError: the storage holds more transitions than the sampler (its capacity rounded up to whole
+                episodes): build the sampler with the storage's ``max_size``.
+        """
         super().mark_update(index, storage=storage)
         if storage is None or getattr(storage, "ndim", 1) != 2:
             return
@@ -115,6 +126,12 @@ class PERSampler(PrioritizedSampler):
         (Path(path) / SCHEDULER_FILE).write_text(json.dumps(self._beta_scheduler.state_dict()))
 
     def loads(self, path: str | Path) -> None:
+        """Loads what :meth:`dumps` wrote, or a TorchRL :class:`~torchrl.data.PrioritizedSampler`'s dump (which has no
+        beta schedule: the schedule keeps its step).
+
+        Raises:
+            ValueError: the dump holds priorities for another number of transitions.
+        """
         # TorchRL's reader, into a sampler of its own: its loads() fails on a sampler that already holds priorities.
         saved = PrioritizedSampler(self.max_size, alpha=self.alpha, beta=self.beta)
         saved.loads(path)

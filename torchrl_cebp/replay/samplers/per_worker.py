@@ -91,16 +91,18 @@ class WorkerRows(_upstream.StorageView, Storage):
         (torch.Size([2, 5]), 20, [1.0, 3.0])
     """
 
-    ndim = 2
+    ndim = 2  #: Rows are episodes and columns their steps, as in the viewed storage.
 
     # Storage.__init__ is not called: it sets max_size, which a view reads from the storage it views.
     def __init__(self, storage: Storage, worker: int, layout: WorkerLayout) -> None:
         self.storage, self.worker, self.layout = storage, worker, layout
-        self.end_key: NestedKey | None = getattr(storage, "end_key", None)  # the storage's episode cut, if any
+        #: The viewed storage's episode-end flag, ``None`` if it keeps none.
+        self.end_key: NestedKey | None = getattr(storage, "end_key", None)
         self._gathered: tuple | None = None  # the counts, their total (a view), and write_counts until a write
 
     @property
     def device(self) -> torch.device:
+        """The viewed storage's device."""
         return self.storage.device
 
     def global_rows(self, local_rows: torch.Tensor) -> torch.Tensor:
@@ -109,11 +111,13 @@ class WorkerRows(_upstream.StorageView, Storage):
 
     @property
     def shape(self) -> torch.Size:
+        """The worker's ``(rows, T)``, its share of the storage's filled rows and the row length."""
         rows, steps = self.storage.shape  # read once: TorchRL's PER asks a view's shape or length 5 times a draw
         return torch.Size((self.layout.rows_of_worker(rows, self.worker), steps))
 
     @property
     def max_size(self) -> int:
+        """This worker's share of the storage's capacity in transitions, its rows of all the storage's times ``T``."""
         row_length = self.storage.shape[1]
         return self.layout.rows_of_worker(self.storage.max_size // row_length, self.worker) * row_length
 
@@ -122,6 +126,12 @@ class WorkerRows(_upstream.StorageView, Storage):
         return self.layout.rows_of_worker(rows, self.worker) * steps
 
     def get(self, index: slice | torch.Tensor | tuple) -> TensorDictBase:
+        """Reads this worker's rows from the storage.
+
+        Args:
+            index (slice, torch.Tensor or tuple): the worker's own rows (a slice of its filled rows, or a tensor of
+                them), or a ``(rows, steps, ...)`` tuple of which only the rows are the worker's.
+        """
         if isinstance(index, slice):
             index = torch.arange(self.shape[0])[index]
         if isinstance(index, tuple):
@@ -138,18 +148,34 @@ class WorkerRows(_upstream.StorageView, Storage):
         return None if common_length is None else common_length()
 
     def set(self, *args: Any, **kwargs: Any) -> None:
+        """Refuses every write: a worker's rows are written, and emptied, through the whole storage.
+
+        Raises:
+            RuntimeError: always.
+        """
         raise RuntimeError("WorkerRows is a read-only view of a worker's rows: write into, or empty, the whole storage")
 
     _empty = set
 
     def state_dict(self) -> dict[str, Any]:
-        return {}  # a view: the whole storage saves the rows
+        """An empty state: the whole storage saves the rows."""
+        return {}
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Accepts the empty state of :meth:`state_dict`.
+
+        Raises:
+            ValueError: a state that holds anything.
+        """
         if state_dict:
             raise ValueError(f"WorkerRows keeps no state of its own, got {sorted(state_dict)}")
 
     def contains(self, item: Any) -> bool:
+        """Not answered by a view.
+
+        Raises:
+            NotImplementedError: always: ask the whole storage.
+        """
         raise NotImplementedError("WorkerRows answers no membership: ask the whole storage")
 
     @property
@@ -267,13 +293,27 @@ class PerWorkerSampler(Sampler):
         return parts
 
     def extend(self, index: torch.Tensor | tuple) -> None:
+        """Passes the buffer's notice of a write's ``index`` on to each worker's sampler, in that worker's own rows
+        (a PER forgets its largest priority if the write overwrote it)."""
         for worker, _, local in self._by_worker(index):
             self.samplers[worker].extend(local)
 
     def add(self, index: int | torch.Tensor) -> None:
+        """As :meth:`extend`, for the buffer's notice of a one-element write."""
         self.extend(torch.as_tensor(index).unsqueeze(0))
 
     def mark_update(self, index: torch.Tensor | int, *, storage: Storage | None = None) -> None:
+        """Routes a write's rows to their workers' samplers, each with its worker's :class:`WorkerRows` of ``storage``.
+
+        Args:
+            index (torch.Tensor or int): the written rows, as the buffer's writer gives them.
+            storage (Storage): the buffer's episode storage.
+
+        Raises:
+            RuntimeError: no ``storage``.
+            ValueError: the write's episodes are not a multiple of ``episodes_per_worker x W``, or this sampler
+                cannot deal out ``storage`` (another storage than its own, not ``ndim=2``, or too small for a write).
+        """
         if storage is None:
             raise RuntimeError("PerWorkerSampler routes each written episode to its worker's sampler and needs the "
                                "storage: use it inside a replay buffer whose writer notifies it.")
@@ -299,6 +339,14 @@ class PerWorkerSampler(Sampler):
                              "lanes across workers")
 
     def update_priority(self, index: Any, priority: float | torch.Tensor, *, storage: Storage | None = None) -> None:
+        """Routes new priorities (TD errors, from ``rb.update_tensordict_priority``) to each transition's worker's
+        sampler, in that worker's own rows.
+
+        Args:
+            index (Any): the transitions, as the buffer's draw gave them: ``(rows, steps)``, ``[k, 2]`` or rows.
+            priority (float or torch.Tensor): one priority for all, or one per transition.
+            storage (Storage, optional): the buffer's storage, of which each worker's sampler gets its view.
+        """
         priority = torch.as_tensor(priority)
         for worker, positions, local in self._by_worker(index):
             part = priority[positions] if priority.numel() > 1 else priority
@@ -306,6 +354,20 @@ class PerWorkerSampler(Sampler):
             self.samplers[worker].update_priority(local, part, storage=view)
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple[torch.Tensor, torch.Tensor], dict]:
+        """Draws ``batch_size // W`` transitions from each worker's sampler over its own rows, worker 0 first.
+
+        Args:
+            storage (Storage): the buffer's episode storage.
+            batch_size (int): the number of transitions, a multiple of ``W``.
+
+        Returns:
+            ``((rows, steps), info)`` as storage rows, and ``info`` holding the workers' IS weights under
+            ``"priority_weight"`` (each normalised by its own worker's sampler) if their samplers give any.
+
+        Raises:
+            ValueError: ``batch_size`` is not a multiple of ``W``.
+            RuntimeError: the storage is empty, or a worker holds no episode yet.
+        """
         workers = self.layout.workers
         if batch_size % workers:
             raise ValueError(f"PerWorkerSampler draws batch_size // workers from each worker: batch_size={batch_size} "
@@ -325,9 +387,15 @@ class PerWorkerSampler(Sampler):
         return (rows, torch.cat(steps)), ({"priority_weight": torch.cat(weights)} if weights else {})
 
     def state_dict(self) -> dict[str, Any]:
+        """The layout (``workers``, ``episodes_per_worker``) and each worker's sampler's state (``shards``)."""
         return {**asdict(self.layout), "shards": [sampler.state_dict() for sampler in self.samplers]}
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
+        """Loads a :meth:`state_dict` into the workers' samplers; the sampler then deals out the next storage it meets.
+
+        Raises:
+            ValueError: the state's layout differs (another number of workers or of episodes per worker).
+        """
         saved, layout = WorkerLayout(state_dict["workers"], state_dict["episodes_per_worker"]), self.layout
         if saved != layout:
             raise ValueError(f"the saved replay has {saved.workers} workers of {saved.episodes_per_worker} episodes "
@@ -403,12 +471,12 @@ class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
 
     @property
     def default_priority(self) -> float:
-        """The priority TorchRL gives a batch without priorities: the workers' (one value for all)."""
+        """The workers' priority (one value for all) that TorchRL gives transitions written without one."""
         return self.samplers[0].default_priority
 
     @property
     def reduction(self) -> str:
-        """How TorchRL reduces a transition's several priorities to one: the workers' (one rule for all)."""
+        """The workers' rule (one for all) by which TorchRL reduces a transition's several priorities to one."""
         return self.samplers[0].reduction
 
     @property
@@ -429,5 +497,6 @@ class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
         return first.beta_scheduler()
 
     def sample(self, storage: Storage, batch_size: int) -> tuple[tuple[torch.Tensor, torch.Tensor], dict]:
+        """As :meth:`PerWorkerSampler.sample`, every worker drawing with worker 0's beta, the one its schedule steps."""
         self.beta = self.samplers[0].beta  # the schedule steps worker 0's
         return super().sample(storage, batch_size)

@@ -31,6 +31,7 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
     """
 
     def episode_priority(self, episodes: TensorDictBase, valid: torch.Tensor) -> torch.Tensor:
+        """Priority 1 for every episode, ``[n]``. Draws never read it: :meth:`draw_episodes` needs no priorities."""
         return torch.ones(episodes.shape[0], dtype=torch.float64)
 
     def _catch_up(self, storage: Storage, written: torch.Tensor | None = None) -> None:
@@ -43,7 +44,9 @@ class UniformEpisodeSampler(EpisodePrioritySampler):
             self._n_stored, self._seen = storage.shape[0], writes
 
     def draw_episodes(self, batch_size: int) -> torch.Tensor:
+        """``batch_size`` episode rows drawn uniformly from the filled ones, with the sampler's generator."""
         return torch.randint(self._n_stored, (batch_size,), generator=_upstream.sampler_generator(self))
 
     def probabilities(self, rows: torch.Tensor) -> torch.Tensor:
+        """``1 / N`` for each of ``rows``, ``N`` the filled rows: the probability that one draw takes it."""
         return torch.full(rows.shape, 1.0 / self._n_stored, dtype=torch.float64)
