@@ -104,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
         5
     """
     parser = argparse.ArgumentParser(
-        prog="python -m torchrl_cebp.sim2real",
+        # As the user typed it: the console script by its name, python -m by the module (not "__main__.py").
+        prog="python -m torchrl_cebp.sim2real" if Path(sys.argv[0]).name == "__main__.py" else None,
         description=__doc__.split("\n\n")[0],
         epilog="Options are written key=value (as in the examples) or --key value.\n\n" + __doc__.split("\n\n", 1)[1],
         formatter_class=argparse.RawDescriptionHelpFormatter,
