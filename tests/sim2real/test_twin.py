@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import cv2
 import numpy as np
 import pytest
@@ -214,11 +216,14 @@ def test_cli_rejects_bad_values_naming_them(capsys):
 
 @pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["debug", "-h"], ["calibrate", "--help"],
                                   ["perceive", "--help"]])
-def test_help_prints_usage_and_exits_0(argv, capsys):
+@pytest.mark.parametrize(("program", "usage"), [("/src/torchrl_cebp/sim2real/__main__.py", "python -m torchrl_cebp.sim2real"),
+                                              ("/venv/bin/torchrl-cebp-sim2real", "torchrl-cebp-sim2real")])
+def test_help_prints_usage_as_typed_and_exits_0(argv, program, usage, capsys, monkeypatch):
+    monkeypatch.setattr(sys, "argv", [program])
     with pytest.raises(SystemExit) as exit_:
         main(argv)
     assert exit_.value.code == 0
-    assert "usage: python -m torchrl_cebp.sim2real" in capsys.readouterr().out
+    assert f"usage: {usage} " in capsys.readouterr().out
 
 
 def test_run_and_debug_share_the_loop_options():
