@@ -263,3 +263,12 @@ def test_a_write_that_never_finished_stops_the_draws_with_how_to_recover():
 def test_an_unknown_storage_kind_is_refused_with_the_known_ones():
     with pytest.raises(ValueError, match=r"unknown storage kind 'disk'; valid kinds: \['memmap', 'tensor'\]"):
         make_replay_buffer(None, HindsightRelabel(sparse_reward), capacity=4 * T, storage="disk")
+
+
+@pytest.mark.filterwarnings("ignore:Got conflicting batch_sizes")  # TorchRL's, for a draw of another size
+@pytest.mark.parametrize("name", sorted(SAMPLERS))
+def test_a_draw_of_no_transitions_is_an_empty_batch_as_torchrls_samplers_give(name):
+    rb = make_replay_buffer(SAMPLERS[name](10 * T), HindsightRelabel(sparse_reward), capacity=10 * T)
+    rb.extend(make_episodes(3))
+    batch = rb.sample(0)
+    assert batch.shape == (0,) and batch["observation"].shape == (0, 25) and batch["next", "reward"].shape == (0, 1)

@@ -291,3 +291,34 @@ def test_the_stored_goals_success_flag_is_dropped_from_a_drawn_batch_or_kept_on_
                               batch_size=256)
     kept.extend(episodes)
     assert (kept.sample()["next", "is_success"] == 0).all()  # as stored
+
+
+def flat_sparse_reward(achieved_goal, desired_goal):  # gymnasium-robotics' compute_reward: [B], float64
+    return -(torch.linalg.vector_norm(achieved_goal - desired_goal, dim=-1) > 0.05).double()
+
+
+def test_a_reward_fn_returning_one_reward_per_transition_gets_the_stored_rewards_shape_and_dtype():
+    flat, kept = (make_replay_buffer(None, HindsightRelabel(reward, future_p=1.0), capacity=10 * T, batch_size=64)
+                  for reward in (flat_sparse_reward, sparse_reward))
+    for rb in (flat, kept):
+        rb.extend(make_episodes(3))
+        rb.set_rng(torch.Generator().manual_seed(0))
+    batch = flat.sample()
+    assert batch["next", "reward"].shape == (64, 1) and batch["next", "reward"].dtype == torch.float32
+    assert torch.equal(batch["next", "reward"], kept.sample()["next", "reward"])  # the same draw, the same rewards
+    her = HindsightRelabel(flat_sparse_reward, future_p=1.0)  # relabel() outside a buffer: the same
+    entries = her.relabel(make_episodes(2), torch.tensor([0, 1, 1]), torch.tensor([0, 5, 9]))
+    assert entries[("next", "reward")].shape == (3, 1) and entries[("next", "reward")].dtype == torch.float32
+
+
+@pytest.mark.parametrize(("reward_fn", "message"), [
+    (lambda ag, g: torch.zeros(ag.shape[0], 2), "returned a reward of shape [64, 2] for 64 transitions, whose stored "
+     "('next', 'reward') has shape [64, 1]: return one reward per transition"),
+    (lambda ag, g: torch.zeros(ag.shape[0], 1, dtype=torch.bool), "returned torch.bool rewards, whose stored "
+     "('next', 'reward') is torch.float32: return float rewards"),
+])
+def test_a_reward_fn_whose_rewards_cannot_take_the_stored_shape_or_dtype_is_refused(reward_fn, message):
+    rb = make_replay_buffer(None, HindsightRelabel(reward_fn), capacity=10 * T, batch_size=64)
+    rb.extend(make_episodes(3))
+    with pytest.raises(ValueError, match=re.escape(message)):
+        rb.sample()

@@ -788,3 +788,26 @@ def test_the_storage_names_the_length_its_episodes_share(lengths, common):
     assert storage.common_length() == common
     storage.set(torch.arange(2), _ending_at([T, T], seed=1))  # rows 0 and 1 whole again
     assert storage.common_length() == (T if lengths[2:] == [T, T] else None)
+
+
+@pytest.mark.parametrize(("make_saved", "make_loaded", "named"), [
+    # The two: CPER's step weights into HER's uniform draws, CEBP's priorities into another temperature.
+    (CPERSampler, UniformEpisodeSampler, "saved by CPERSampler(threshold=1.0, lam=10.0, touch_key=('next', 'touch'), "
+     "end_key=('next', 'done')), but is loaded into UniformEpisodeSampler(end_key=('next', 'done'))"),
+    (lambda: CEBPSampler(temperature=0.01), lambda: CEBPSampler(temperature=0.05), "temperature=0.01, beta=1.0"),
+    (MEPSampler, CPERSampler, "saved by MEPSampler("),
+    (CPERSampler, MEPSampler, "saved by CPERSampler("),  # not blamed on an older MEP state
+    (lambda: PERSampler(10 * T, alpha=0.6), lambda: PERSampler(10 * T, alpha=0.7), "loaded into PERSampler(alpha=0.7"),
+], ids=["cper_to_uniform", "cebp_temperature", "mep_to_cper", "cper_to_mep", "per_alpha"])
+@pytest.mark.parametrize("how", ["state_dict", "dumps"])
+def test_a_state_loaded_into_a_sampler_of_another_kind_or_arguments_is_refused_naming_both(
+        make_saved, make_loaded, named, how, tmp_path):
+    saved = make_saved()
+    if how == "dumps" and isinstance(saved, PERSampler):
+        pytest.skip("PER dumps TorchRL's own files, which name no sampler")
+    rb = make_replay_buffer(saved, HindsightRelabel(sparse_reward), capacity=10 * T, batch_size=8)
+    rb.extend(make_episodes(3))
+    rb.sample()
+    with pytest.raises(ValueError, match=re.escape(named)):
+        restore(saved, make_loaded(), how, tmp_path)
+    restore(saved, make_saved(), how, tmp_path)  # one built as the saved one was loads it

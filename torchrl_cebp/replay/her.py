@@ -30,7 +30,9 @@ class HindsightRelabel(SampleUnit):
 
     Args:
         reward_fn (Callable[[torch.Tensor, torch.Tensor], torch.Tensor]): vectorised sparse reward,
-            ``[..., 3], [..., 3] -> [..., 1]`` (e.g. the env's ``compute_reward``).
+            ``[..., 3], [..., 3] -> [..., 1]`` (e.g. the env's ``compute_reward``). Its reward takes the stored
+            reward's shape and dtype: ``[...]`` (gymnasium-robotics' form) is reshaped, a float one cast; a reward of
+            another number of elements, or not of floats, is refused (``ValueError``).
         future_p (float, optional): probability to relabel a transition (0.8 is HER's replay_k=4).
             Defaults to ``0.8``.
         strategy (str, optional): ``"future"``, ``"final"``, ``"episode"`` or ``"past"``.
@@ -104,21 +106,44 @@ class HindsightRelabel(SampleUnit):
         flat = torch.add(steps, rows, alpha=episodes.shape[1])
         stored_goal = require_key(episodes, self.goal_key, (None,)).flatten(0, 1).index_select(0, flat)
         achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1).index_select(0, flat)
-        entries = self._relabelled(relabel, candidate, stored_goal, achieved)
+        stored_reward = episodes.get(self.reward_key, None)
+        stored_reward = None if stored_reward is None else (flat.shape + stored_reward.shape[2:], stored_reward.dtype)
+        entries = self._relabelled(relabel, candidate, stored_goal, achieved, stored_reward)
         if self.relabelled_key is not None:
             entries[self.relabelled_key] = relabel
         return entries
 
     def _relabelled(
-        self, relabel: torch.Tensor, candidate: torch.Tensor, stored_goal: torch.Tensor, next_achieved: torch.Tensor
+        self, relabel: torch.Tensor, candidate: torch.Tensor, stored_goal: torch.Tensor, next_achieved: torch.Tensor,
+        stored_reward: tuple[torch.Size, torch.dtype] | None,
     ) -> dict[NestedKey, torch.Tensor]:
-        """The goal and reward entries of transitions: ``candidate`` where ``relabel``, else their stored goal.
+        """The goal and reward entries of transitions: ``candidate`` where ``relabel``, else their stored goal; the
+        reward in the stored reward's ``(shape, dtype)`` if one is stored.
 
         The one place both :meth:`relabel` and the buffer's :meth:`collate` build them.
         """
         goal = torch.where(relabel.unsqueeze(-1), candidate, stored_goal)
         reward = self.reward_fn(next_achieved, goal)
+        if stored_reward is not None:
+            reward = self._as_stored(torch.as_tensor(reward), *stored_reward)
         return {self.goal_key: goal, next_key(self.goal_key): goal, self.reward_key: reward}
+
+    def _as_stored(self, reward: torch.Tensor, shape: torch.Size, dtype: torch.dtype) -> torch.Tensor:
+        """``reward_fn``'s reward in the stored reward's shape and dtype: one of as many elements is reshaped (the
+        ``[B]`` of gymnasium-robotics' ``compute_reward`` to ``[B, 1]``), a floating one cast; any other refused."""
+        if reward.shape != shape:
+            if reward.numel() != shape.numel():
+                raise ValueError(f"HindsightRelabel's reward_fn returned a reward of shape {list(reward.shape)} for "
+                                 f"{shape[0]} transitions, whose stored {self.reward_key!r} has shape {list(shape)}: "
+                                 "return one reward per transition (e.g. vector_norm(..., keepdim=True))")
+            reward = reward.reshape(shape)
+        if reward.dtype != dtype:
+            if not reward.is_floating_point():
+                raise ValueError(f"HindsightRelabel's reward_fn returned {reward.dtype} rewards, whose stored "
+                                 f"{self.reward_key!r} is {dtype}: return float rewards (e.g. -(distance > "
+                                 "threshold).float())")
+            reward = reward.to(dtype)
+        return reward
 
     def _draw(
         self, episodes: TensorDictBase, rows: torch.Tensor, steps: torch.Tensor, generator: torch.Generator | None,
@@ -207,7 +232,10 @@ class HindsightRelabel(SampleUnit):
                                "TensorDictReplayBuffer(sample_unit=her, ...)")
         self._pending.draw = None
         self._collated = True
-        entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key))
+        stored_reward = data.get(self.reward_key, None)
+        stored_reward = None if stored_reward is None else (stored_reward.shape, stored_reward.dtype)
+        entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key),
+                                   stored_reward)
         for key, value in entries.items():
             data.set(key, value)
         if self.success_key is not None and data.get(self.success_key, None) is not None:

@@ -104,7 +104,7 @@ class _EpisodeRows:
         and write count.
 
         Every check runs before any row changes, so that a refused write stores nothing (and rewinds the buffer's
-        writer): the data must be ``[n, T]`` episodes of the storage's row length with one end flag each at most,
+        writer, if the write came from its ``extend``: a direct ``set`` moved none): the data must be ``[n, T]`` episodes of the storage's row length with one end flag each at most,
         hold every stored entry and no other, and pass the buffer's sampler's ``check_episodes``. Data that is not a
         tensordict goes to TorchRL's storage unchecked.
 
@@ -136,7 +136,7 @@ class _EpisodeRows:
             if known:
                 self._set_lengths(rows, lengths)
         except Exception:
-            if set_cursor and isinstance(cursor, torch.Tensor) and cursor.numel():
+            if set_cursor and _written_by_round_robin_writer(cursor, data):
                 _upstream.rewind_writers(self, cursor.reshape(-1))
             raise
         finally:
@@ -406,15 +406,24 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
         consecutive rows as views of the blocks, and any other index as TorchRL's storage reads it.
 
         Raises:
-            IndexError: a step outside the rows' ``T`` steps (a negative one counts from the end).
+            IndexError: a pair's row outside the filled rows or step outside the rows' ``T`` steps (negative ones
+                count from the end).
         """
         if self.initialized and _is_pair_index(index):
             _, blocks, _, plan, n_nodes, row_length = self._layout()
-            low, high = map(int, torch.aminmax(index[1])) if index[1].numel() else (0, 0)  # ints: compared faster
+            rows, steps = index
+            low, high = map(int, torch.aminmax(steps)) if steps.numel() else (0, 0)  # ints: compared faster
             if low < -row_length or high >= row_length:  # the flat read below would take a neighbouring row's step
                 raise IndexError(f"step {high if high >= row_length else low} is outside rows of {row_length} steps")
-            steps = index[1] if low >= 0 else index[1] % row_length  # a negative step counts from the end, as TorchRL's
-            flat = torch.add(steps, index[0], alpha=row_length)
+            steps = steps if low >= 0 else steps % row_length  # a negative step counts from the end, as TorchRL's
+            # Rows count among the filled ones, as TorchRL's read of its filled rows does: a negative row from the
+            # last filled one, and none past it (the blocks hold the unfilled rows' old memory there).
+            filled = -(len(self) // -row_length)
+            low, high = map(int, torch.aminmax(rows)) if rows.numel() else (0, 0)
+            if low < -filled or high >= filled:
+                raise IndexError(f"row {high if high >= filled else low} is outside the {filled} filled rows")
+            rows = rows if low >= 0 else rows % filled
+            flat = torch.add(steps, rows, alpha=row_length)
             # One gather per dtype block; one split cuts out all of its entries (a slice each costs twice), called
             # as split_with_sizes: Tensor.split's Python wrapper costs as much again.
             columns = [c for block, widths in blocks for c in block.index_select(0, flat).split_with_sizes(widths, 1)]
@@ -441,6 +450,14 @@ class EpisodeStorage(_EpisodeRows, LazyTensorStorage):
                 value = columns[column]
                 nodes[node][name] = value if shape is None else _reshaped(value, shape)
         return _upstream.unchecked_tensordict(nodes[0], batch_size, self.device)
+
+
+def _written_by_round_robin_writer(cursor: Any, data: TensorDictBase) -> bool:
+    """Whether a write comes from a TorchRL round-robin writer's ``extend``, which moved its cursor before it: that
+    writer gives each written row its ``"index"``, the cursor; a direct ``storage.set`` moved none, so none rewinds."""
+    index = data.get("index", None)
+    return (isinstance(cursor, torch.Tensor) and cursor.ndim == 1 and cursor.numel() > 0 and index is not None
+            and index.shape[:1] == cursor.shape and torch.equal(index.reshape(cursor.numel(), -1)[:, 0], cursor))
 
 
 def _names_by_node(keys: Iterable[NestedKey]) -> dict[tuple[str, ...], set[str]]:

@@ -124,15 +124,14 @@ class RunCheckpoints:
     def __init__(self, run_dir: str | Path) -> None:
         run_dir = Path(run_dir)
         self.newest, self.previous = run_dir / CHECKPOINT_NAME, run_dir / PREVIOUS_CHECKPOINT_NAME
-        # False once load() fell back: the newest file is damaged and must not become the previous one.
-        self._newest_is_whole = True
 
     def exists(self) -> bool:
         """Whether the run directory holds a checkpoint (either file)."""
         return self.newest.is_file() or self.previous.is_file()
 
     def save(self, state: dict[str, Any]) -> Path:
-        """Writes ``state`` as the newest checkpoint; the one it replaces becomes the previous one.
+        """Writes ``state`` as the newest checkpoint; the one it replaces becomes the previous one, unless it is damaged
+        (a load fell back from it, or it is no whole file of ``torch.save``): then the previous one stays.
 
         Args:
             state (dict): plain tensors and containers (:func:`training_state`).
@@ -140,8 +139,9 @@ class RunCheckpoints:
         Returns:
             the newest checkpoint's path.
         """
-        _save_atomically(state, self.newest, keep_replaced_as=self.previous if self._newest_is_whole else None)
-        self._newest_is_whole = True
+        damaged = _is_damaged(self.newest)  # it must not replace the previous one, which loads
+        _save_atomically(state, self.newest, keep_replaced_as=None if damaged else self.previous)
+        _FELL_BACK_FROM.pop(self.newest.resolve(), None)
         return self.newest
 
     def load(self, map_location: torch.device | str = "cpu") -> dict[str, Any]:
@@ -170,11 +170,33 @@ class RunCheckpoints:
                 raise UnreadableFileError(
                     f"no checkpoint of {self.newest.parent} loads: {newest_error}; {previous_error}"
                 ) from None
-            self._newest_is_whole = False
+            _FELL_BACK_FROM[self.newest.resolve()] = _file_version(self.newest)
             # The previous checkpoint is one epoch older than the newest: falling back repeats that one epoch.
             logger.warning(f"{newest_error}; resuming from {self.previous.name} (epoch {state['epoch']}) instead, "
                            f"which repeats 1 epoch (epoch {state['epoch'] + 1})")
             return state
+
+
+# The newest checkpoints a load of this process fell back from, each with the size and time of the version that did
+# not load: the next save, by whichever RunCheckpoints or save_checkpoint, must not keep it as the previous one.
+_FELL_BACK_FROM: dict[Path, tuple[int, int] | None] = {}
+
+
+def _file_version(path: Path) -> tuple[int, int] | None:
+    """A file's size and modification time (``None`` if there is none): a file written again has another."""
+    try:
+        stat = path.stat()
+    except FileNotFoundError:
+        return None
+    return stat.st_size, stat.st_mtime_ns
+
+
+def _is_damaged(newest: Path) -> bool:
+    """Whether the newest checkpoint is one a load fell back from, or not a whole file of ``torch.save`` (a zip)."""
+    fell_back_from = _FELL_BACK_FROM.get(newest.resolve(), False)
+    if fell_back_from is not False and fell_back_from == _file_version(newest):
+        return True
+    return newest.is_file() and not zipfile.is_zipfile(newest)
 
 
 def save_checkpoint(state: dict[str, Any], run_dir: str | Path) -> Path:
@@ -289,7 +311,8 @@ def restore_training_state(
         beta_scheduler (LinearScheduler or None): loaded in place, if any.
 
     Raises:
-        ConfigError: a checkpoint of another format, or of another run (:func:`check_same_run`).
+        ConfigError: a checkpoint of another format, or of another run (:func:`check_same_run`); one of another
+            sampler names the fix, a new run folder.
     """
     if state.get("format") != CHECKPOINT_FORMAT:
         raise ConfigError(
@@ -297,7 +320,15 @@ def restore_training_state(
             f"{CHECKPOINT_FORMAT} (episodes from TorchRL collectors); continue it with the commit in its "
             "progress.csv's code_commit column, or start a new run"
         )
-    check_same_run(state["config"], cfg)
+    try:
+        check_same_run(state["config"], cfg)
+    except ConfigError as error:
+        saved_sampler = (state["config"].get("sampler") or {}).get("_target_")
+        if saved_sampler == OmegaConf.select(cfg, "sampler._target_"):
+            raise
+        # Its priorities are another sampler's (the sampler refuses its state too): nothing of the run carries over.
+        raise ConfigError(f"{error}; a run with another sampler is a new run: give it a new run folder "
+                          "(hydra.run.dir=...)") from None
     agent.loss.load_state_dict(state["loss"])
     agent.normalizer.load_state_dict(state["normalizer"])
     optimizer.load_state_dict(state["optimizer"])

@@ -5,6 +5,7 @@ The steps after an episode's end flag are padding: priorities ignore them and dr
 from __future__ import annotations
 
 import abc
+import inspect
 import math
 import weakref
 from pathlib import Path
@@ -24,6 +25,68 @@ FLOAT32_EPS = float(torch.finfo(torch.float32).eps)
 EMPTY_STORAGE_ERROR = "Cannot sample from an empty storage."
 # What dumps() writes into its folder: the state_dict, which torch.load(weights_only=True) reads back.
 SAMPLER_STATE_FILE = "sampler_state.pt"
+
+
+# Where a sampler's state names the kind and arguments of the sampler that saved it.
+SAMPLER_KEY = "sampler"
+
+
+def sampler_identity(sampler: Sampler, *, changing: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The sampler's class and the arguments it was built with, as its attributes of the same names hold them.
+
+    A state's priorities are valid only for a sampler of the same kind and arguments (CEBP's temperature, CPER's
+    step weights): every state of this package's samplers carries this under ``"sampler"``. The arguments are
+    those of the ``__init__`` of each class of the sampler outside TorchRL, whose values are plain (numbers, strings,
+    keys); ``changing`` names those that change as it runs (PER's annealed ``beta``).
+
+    Examples:
+        >>> from torchrl_cebp.replay.samplers import CPERSampler
+        >>> sampler_identity(CPERSampler(lam=5.0))
+        {'kind': 'CPERSampler', 'arguments': {'threshold': 1.0, 'lam': 5.0, 'touch_key': ('next', 'touch'), \
+'end_key': ('next', 'done')}}
+    """
+    arguments: dict[str, Any] = {}
+    for cls in type(sampler).__mro__:
+        if cls.__module__.startswith("torchrl.") or "__init__" not in cls.__dict__:
+            continue  # TorchRL's arguments are its state's own (PER's alpha, beta and eps are in it)
+        for name, parameter in inspect.signature(cls.__init__).parameters.items():
+            if (name == "self" or name in changing or name in arguments
+                    or parameter.kind in (parameter.VAR_POSITIONAL, parameter.VAR_KEYWORD)):
+                continue
+            value = getattr(sampler, name, _ABSENT)
+            if value is not _ABSENT and _is_plain(value):
+                arguments[name] = value
+    return {"kind": type(sampler).__qualname__, "arguments": arguments}
+
+
+def require_same_sampler(sampler: Sampler, state: dict[str, Any], *, changing: tuple[str, ...] = ()) -> None:
+    """Refuses a state saved by a sampler of another kind or other arguments (``sampler_identity``), naming both.
+
+    A state without one (TorchRL's own samplers', or saved before states named their sampler) is taken as it is.
+
+    Raises:
+        ValueError: the state's sampler differs from ``sampler``.
+    """
+    saved = state.get(SAMPLER_KEY)
+    own = sampler_identity(sampler, changing=changing)
+    if saved is not None and saved != own:
+        raise ValueError(f"the state was saved by {_described(saved)}, but is loaded into {_described(own)}: its "
+                         "priorities hold only for a sampler of the same kind and arguments. Load it into a sampler "
+                         "built as the saved one was, or start this sampler empty (a new run)")
+
+
+_ABSENT = object()  # an argument the sampler keeps under another name (PER's capacity: max_size)
+
+
+def _described(identity: dict[str, Any]) -> str:
+    arguments = ", ".join(f"{name}={value!r}" for name, value in identity["arguments"].items())
+    return f"{identity['kind']}({arguments})"
+
+
+def _is_plain(value: Any) -> bool:
+    if isinstance(value, (tuple, list)):
+        return all(map(_is_plain, value))
+    return value is None or isinstance(value, (bool, int, float, str))
 
 
 def dump_state(sampler: Sampler, path: str | Path) -> None:
@@ -76,7 +139,7 @@ def checked(owner: str, name: str, value: float, *, minimum: float = 0.0, exclus
 def batch_normalised_weights(probabilities: torch.Tensor, n_episodes: int, beta: float) -> torch.Tensor:
     """Importance-sampling weights ``(N p)^-beta`` of the drawn episodes over the batch's largest (PER's form)."""
     weights = (n_episodes * probabilities).pow_(-beta)
-    return weights.div_(weights.max())
+    return weights.div_(weights.max()) if weights.numel() else weights  # a draw of none (TorchRL's sample(0))
 
 
 def episode_positions(episodes: TensorDictBase, position_key: NestedKey, next_position_key: NestedKey) -> torch.Tensor:
@@ -381,15 +444,20 @@ class EpisodePrioritySampler(Sampler, abc.ABC):
     # ---- state --------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
         """The priorities, the number of rows written and any cumulative step weights, as tensors and numbers that
-        ``torch.load(weights_only=True)`` reads."""
-        state = {"priorities": self.priorities(), "n_stored": self._n_stored}
+        ``torch.load(weights_only=True)`` reads, and the sampler's kind and arguments (``sampler_identity``)."""
+        state = {"priorities": self.priorities(), "n_stored": self._n_stored, SAMPLER_KEY: sampler_identity(self)}
         if self._cumulative_step_weights is not None:
             state["cumulative_step_weights"] = self._cumulative_step_weights.clone()
         return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         """Restores a :meth:`state_dict`, taken to match the rows of the storage the sampler meets next; rows written
-        after that are scored as usual."""
+        after that are scored as usual.
+
+        Raises:
+            ValueError: the state was saved by a sampler of another kind or other arguments.
+        """
+        require_same_sampler(self, state_dict)
         # Older states also carry the valid lengths, which the storage keeps: they are left unread.
         priorities = self._priorities = state_dict["priorities"].to(torch.float64).clone()
         self._n_stored = int(state_dict["n_stored"])

@@ -11,7 +11,7 @@ from tensordict.utils import NestedKey
 from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp.replay.episodes import episode_lengths, stored_lengths, valid_steps
-from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, checked, episode_positions
+from torchrl_cebp.replay.samplers.base import EpisodePrioritySampler, checked, episode_positions, require_same_sampler
 
 # The paper's code adds it to the dense rank (from 0), so that the most common trajectories stay drawable.
 RANK_OFFSET = 0.001
@@ -193,8 +193,10 @@ class MEPSampler(EpisodePrioritySampler):
         """Restores a :meth:`state_dict`, the fitted mixture included.
 
         Raises:
-            ValueError: a state without per-episode scores, from an older MEPSampler.
+            ValueError: a state of another sampler kind or other arguments, or one without per-episode scores, from
+                an older MEPSampler.
         """
+        require_same_sampler(self, state_dict)  # first: another sampler's state lacks the scores too
         if "scores" not in state_dict:
             raise ValueError("this MEP state is from a version of MEPSampler that did not rank the whole buffer on "
                              "every write; it holds no per-episode scores to rank: start the run again")

@@ -13,8 +13,10 @@ from torchrl.data.replay_buffers.storages import Storage
 
 from torchrl_cebp import _upstream
 from torchrl_cebp.replay.episodes import shared_length, stored_lengths, valid_steps
-from torchrl_cebp.replay.samplers.base import checked, stored_rows
+from torchrl_cebp.replay.samplers.base import SAMPLER_KEY, checked, require_same_sampler, sampler_identity, stored_rows
 
+# The argument that changes as the sampler runs: its state's beta is the annealed one.
+ANNEALED = ("beta",)
 # Written beside TorchRL's files by PERSampler.dumps.
 SCHEDULER_FILE = "beta_scheduler.json"
 
@@ -101,12 +103,20 @@ class PERSampler(PrioritizedSampler):
     def state_dict(self) -> dict[str, Any]:
         """TorchRL's sampler's state as plain tensors and numbers, which ``torch.load(weights_only=True)`` reads.
 
-        TorchRL's own holds C++ trees; give one of its samplers ``PrioritizedSampler.state_dict(per_sampler)``.
+        TorchRL's own holds C++ trees; give one of its samplers ``PrioritizedSampler.state_dict(per_sampler)``. It
+        also names the sampler's kind and arguments but the annealed ``beta`` (``sampler_identity``).
         """
-        return {**_upstream.prioritized_state(self), "beta_scheduler": self._beta_scheduler.state_dict()}
+        return {**_upstream.prioritized_state(self), "beta_scheduler": self._beta_scheduler.state_dict(),
+                SAMPLER_KEY: sampler_identity(self, changing=ANNEALED)}
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
-        """Loads this class's state, or a TorchRL :class:`~torchrl.data.PrioritizedSampler`'s, of the same capacity."""
+        """Loads this class's state, or a TorchRL :class:`~torchrl.data.PrioritizedSampler`'s, of the same capacity.
+
+        Raises:
+            ValueError: the state holds priorities for another number of transitions, or was saved by a sampler of
+                another kind or other arguments.
+        """
+        require_same_sampler(self, state_dict, changing=ANNEALED)
         # None in a TorchRL sampler's state, nor in ours from before the scheduler was part of it.
         scheduler_state = state_dict.get("beta_scheduler")
         if "_sum_tree" in state_dict:  # TorchRL's: its C++ trees (ours holds their values as tensors)
