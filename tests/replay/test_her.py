@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 import torch
-from torchrl.data import PrioritizedSampler, RandomSampler, TensorDictReplayBuffer
+from torchrl.data import LazyTensorStorage, PrioritizedSampler, RandomSampler, SliceSampler, TensorDictReplayBuffer
 from torchrl.envs import Compose, ObservationNorm, RewardScaling
 
 from tests.replay.conftest import T, make_episodes, sparse_reward
@@ -321,4 +321,14 @@ def test_a_reward_fn_whose_rewards_cannot_take_the_stored_shape_or_dtype_is_refu
     rb = make_replay_buffer(None, HindsightRelabel(reward_fn), capacity=10 * T, batch_size=64)
     rb.extend(make_episodes(3))
     with pytest.raises(ValueError, match=re.escape(message)):
+        rb.sample()
+
+
+def test_her_over_a_flat_storage_is_refused_naming_the_episode_storage_it_needs():
+    her = HindsightRelabel(sparse_reward)
+    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(10 * T), sampler=SliceSampler(slice_len=10), batch_size=20,
+                                sample_unit=her, collate_fn=her.collate)
+    rb.extend(make_episodes(3).reshape(-1))  # frames one after another, as a flat buffer holds them
+    with pytest.raises(ValueError, match=re.escape("needs an episode storage of [episode, t] rows (ndim=2), got "
+                                                   "LazyTensorStorage with ndim=1: use EpisodeStorage(capacity)")):
         rb.sample()

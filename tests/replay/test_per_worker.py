@@ -150,6 +150,16 @@ def test_torchrls_tensordict_priority_update_reaches_every_per_shard():
     assert [float(shard["max_priority"]) for shard in sampler.state_dict()["shards"]] == [1e6] * WORKERS
 
 
+def test_a_per_worker_sampler_of_pers_answers_every_public_attribute_of_a_prioritized_sampler():
+    sampler = per_workers(4 * CYCLE * T)
+    public = [name for name in dir(PrioritizedSampler) if not name.startswith("_")]
+    for name in public:  # every one TorchRL or a user may read of a PrioritizedSampler
+        getattr(sampler, name)
+    assert (sampler.max_size, sampler.alpha, sampler.device) == (4 * CYCLE * T, 0.6, torch.device("cpu"))
+    sampler.alpha = 0.7
+    assert [shard.alpha for shard in sampler.samplers] == [0.7] * WORKERS
+
+
 @pytest.mark.parametrize("make_shard", [RandomSampler, lambda: PrioritizedSampler(2 * CYCLE * T // WORKERS, 0.6, 0.4)])
 def test_torchrls_stock_samplers_work_as_the_workers_samplers(make_shard):
     sampler = PerWorkerSampler(*[make_shard() for _ in range(WORKERS)], episodes_per_worker=PER_WORKER)

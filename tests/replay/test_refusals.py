@@ -245,3 +245,31 @@ def test_a_memmap_storage_loaded_from_a_state_keeps_its_rows_in_its_scratch_dir(
     observation = _upstream.stored_tensordict(target.storage).get("observation")
     assert Path(observation.filename).parent == tmp_path / "target"  # not anonymous memory, which RAM must hold
     assert torch.equal(target.storage.get(slice(0, 2))["observation"], make_episodes(2)["observation"])
+
+
+def test_a_refused_direct_write_into_the_storage_leaves_the_buffers_writer_where_it_was():
+    rb = TensorDictReplayBuffer(storage=EpisodeStorage(8 * T), dim_extend=0)
+    rb.extend(make_episodes(4))  # the writer's next row: 4
+    with pytest.raises(ValueError, match="episodes of 20 steps cannot go into a storage of 50-step episodes"):
+        rb.storage.set(torch.tensor([1, 2, 3]), make_episodes(3, length=20))
+    assert rb.write_count == 4
+    rb.extend(make_episodes(1, seed=1))  # into row 4: rows 1-3 keep their episodes
+    assert torch.equal(rb.storage.get(slice(0, 4))["observation"], make_episodes(4)["observation"])
+    assert torch.equal(rb.storage.get(torch.tensor([4]))["observation"], make_episodes(1, seed=1)["observation"])
+    with pytest.raises(ValueError, match="cannot go into a storage of 50-step episodes"):
+        rb.extend(make_episodes(2, length=20))  # a refused extend still rewinds the writer it moved
+    assert rb.write_count == 5
+
+
+def test_a_pair_read_takes_each_row_among_the_filled_ones_as_torchrl_storage_does():
+    episodes = make_episodes(3)
+    ours, theirs = EpisodeStorage(4 * T), LazyTensorStorage(4 * T, ndim=2)
+    for storage in (ours, theirs):
+        TensorDictReplayBuffer(storage=storage, dim_extend=0).extend(episodes)
+    rows, steps = torch.tensor([-1, -3, 2]), torch.tensor([0, 4, -1])
+    assert torch.equal(ours.get((rows, steps))["observation"], theirs.get((rows, steps))["observation"])
+    for outside in (3, -4):  # row 3 is allocated, but not filled
+        with pytest.raises(IndexError, match=f"row {outside} is outside the 3 filled rows"):
+            ours.get((torch.tensor([0, outside]), torch.tensor([0, 1])))
+        with pytest.raises(IndexError):
+            theirs.get((torch.tensor([0, outside]), torch.tensor([0, 1])))

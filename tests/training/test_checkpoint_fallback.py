@@ -4,17 +4,19 @@ import math
 import re
 import subprocess
 import sys
+import zipfile
 
 import hydra
 import pytest
+from omegaconf import OmegaConf
 
 from tests.tiny_run import REPO, TINY, TINY_RUN, config, copy_run, rows
 from torchrl_cebp.training import train
 from torchrl_cebp.training.checkpoint import (
-    BEST_POLICY_NAME, CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME, BestPolicy, RunCheckpoints, UnreadableFileError,
-    load_checkpoint, load_file, save_checkpoint,
+    BEST_POLICY_NAME, CHECKPOINT_FORMAT, CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME, BestPolicy, RunCheckpoints,
+    UnreadableFileError, load_checkpoint, load_file, restore_training_state, save_checkpoint,
 )
-from torchrl_cebp.training.config import with_legacy_defaults
+from torchrl_cebp.training.config import ConfigError, with_legacy_defaults
 
 
 def truncate(path):
@@ -139,3 +141,26 @@ def test_every_reader_of_an_older_checkpoint_gets_the_samplers_current_module(tm
     save_checkpoint(saved, tmp_path)
     sampler = load_checkpoint(tmp_path)["config"]["sampler"]  # what compare_draws and diagnose_franka build from
     assert hydra.utils.instantiate(sampler).beta == 0.7
+
+
+def test_save_checkpoint_after_a_fallback_keeps_the_previous_file_that_loaded(tmp_path):
+    save_checkpoint({"epoch": 0}, tmp_path)
+    save_checkpoint({"epoch": 1}, tmp_path)
+    with zipfile.ZipFile(tmp_path / CHECKPOINT_NAME, "w") as damaged:  # a whole zip, but no file of torch.save
+        damaged.writestr("checkpoint/data.pkl", b"not a pickle")
+    assert load_checkpoint(tmp_path)["epoch"] == 0  # falls back...
+    save_checkpoint({"epoch": 1}, tmp_path)  # ...and the run's next save, through the exported pair, keeps it
+    assert [load_file(tmp_path / name)["epoch"] for name in (CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME)] == [1, 0]
+    save_checkpoint({"epoch": 2}, tmp_path)  # the whole newest becomes the previous one again
+    assert [load_file(tmp_path / name)["epoch"] for name in (CHECKPOINT_NAME, PREVIOUS_CHECKPOINT_NAME)] == [2, 1]
+
+
+def test_a_resume_with_another_sampler_is_refused_naming_a_new_run_folder():
+    saved = {"format": CHECKPOINT_FORMAT, "config": OmegaConf.to_container(config(*TINY_RUN), resolve=True)}
+    with pytest.raises(ConfigError, match=re.escape("a run with another sampler is a new run: give it a new run "
+                                                    "folder (hydra.run.dir=...)")) as refused:
+        restore_training_state(saved, config("sampler=cper", "env=push"), None, None, None, None)
+    assert "this config has sampler._target_='torchrl_cebp.replay.samplers.CPERSampler'" in str(refused.value)
+    with pytest.raises(ConfigError) as refused:  # another setting of the same sampler: no new folder named
+        restore_training_state(saved, config(*TINY_RUN, "seed=7"), None, None, None, None)
+    assert "new run folder" not in str(refused.value)

@@ -190,6 +190,7 @@ class HindsightRelabel(SampleUnit):
             goal.
 
         Raises:
+            ValueError: the storage is not an episode storage (``ndim=2``).
             RuntimeError: the previous draw never reached :meth:`collate`: the buffer lacks this instance as its
                 ``collate_fn``.
         """
@@ -202,6 +203,12 @@ class HindsightRelabel(SampleUnit):
                                    "buffer the same instance as collate_fn too, e.g. TensorDictReplayBuffer("
                                    "sample_unit=her, collate_fn=her.collate, ...). (If it has it, that first draw was "
                                    "interrupted before its batch was read; sample again.)")
+        if getattr(storage, "ndim", 1) != 2:  # a flat storage's draws are no (episode, step) pairs to relabel within
+            raise ValueError(f"HindsightRelabel takes its goals from the drawn transition's own episode, so it needs "
+                             f"an episode storage of [episode, t] rows (ndim=2), got {type(storage).__name__} with "
+                             f"ndim={getattr(storage, 'ndim', 1)}: use EpisodeStorage(capacity) (or "
+                             "LazyTensorStorage(capacity, ndim=2)) and write [n_episodes, T] episodes with "
+                             "dim_extend=0; a collector's frames need EpisodeWriter(max_episode_steps)")
         rows, steps = split_index(index)
         generator = _upstream.buffer_generator(storage)
         lengths = shared_length(storage, self.end_key)

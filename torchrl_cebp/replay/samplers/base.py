@@ -41,9 +41,9 @@ def sampler_identity(sampler: Sampler, *, changing: tuple[str, ...] = ()) -> dic
 
     Examples:
         >>> from torchrl_cebp.replay.samplers import CPERSampler
-        >>> sampler_identity(CPERSampler(lam=5.0))
-        {'kind': 'CPERSampler', 'arguments': {'threshold': 1.0, 'lam': 5.0, 'touch_key': ('next', 'touch'), \
-'end_key': ('next', 'done')}}
+        >>> identity = sampler_identity(CPERSampler(lam=5.0))
+        >>> identity["kind"], identity["arguments"]["lam"], identity["arguments"]["touch_key"]
+        ('CPERSampler', 5.0, ('next', 'touch'))
     """
     arguments: dict[str, Any] = {}
     for cls in type(sampler).__mro__:

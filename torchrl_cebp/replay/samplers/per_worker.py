@@ -456,7 +456,9 @@ class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
     """A :class:`PerWorkerSampler` of :class:`~torchrl.data.PrioritizedSampler` s (PER), which it becomes by itself.
 
     A PrioritizedSampler to TorchRL, so that ``rb.update_tensordict_priority(batch)`` routes each row's priority to
-    its worker's PER (:meth:`PerWorkerSampler.update_priority`). None of PrioritizedSampler's own state is built.
+    its worker's PER (:meth:`PerWorkerSampler.update_priority`). None of PrioritizedSampler's own state is built:
+    each of its public attributes answers for the workers' PERs (``max_size``: their sum; ``alpha``, ``beta``,
+    ``device``: the value they share).
 
     Args:
         *samplers (PrioritizedSampler): one PER per worker, as for :class:`PerWorkerSampler`.
@@ -465,9 +467,29 @@ class PrioritizedPerWorkerSampler(PerWorkerSampler, PrioritizedSampler):
     Examples:
         >>> from torchrl_cebp.replay.samplers import PERSampler
         >>> sampler = PerWorkerSampler(PERSampler(4 * 50), PERSampler(4 * 50))
-        >>> type(sampler).__name__, isinstance(sampler, PrioritizedSampler)
-        ('PrioritizedPerWorkerSampler', True)
+        >>> type(sampler).__name__, isinstance(sampler, PrioritizedSampler), sampler.max_size, sampler.alpha
+        ('PrioritizedPerWorkerSampler', True, 400, 0.6)
     """
+
+    @property
+    def max_size(self) -> int:
+        """The transitions the workers' PERs hold priorities for, all together."""
+        return sum(sampler.max_size for sampler in self.samplers)
+
+    @property
+    def device(self) -> torch.device:
+        """Where the workers' PERs keep their priorities (worker 0's: a buffer's are on one device)."""
+        return self.samplers[0].device
+
+    @property
+    def alpha(self) -> float:
+        """The workers' priority exponent, one value for all."""
+        return self.samplers[0].alpha
+
+    @alpha.setter
+    def alpha(self, value: float) -> None:
+        for sampler in self.samplers:
+            sampler.alpha = value
 
     @property
     def default_priority(self) -> float:
