@@ -508,7 +508,8 @@ class EpisodeMemmapStorage(_EpisodeRows, LazyMemmapStorage):
 
     Keyword Args:
         scratch_dir (str, optional): the folder of the memory-mapped files. Defaults to ``None`` (temporary files).
-        device, end_key: as for :class:`EpisodeStorage`.
+        device (torch.device or str, optional): as for :class:`EpisodeStorage`. Defaults to ``"cpu"``.
+        end_key (NestedKey, optional): as for :class:`EpisodeStorage`. Defaults to ``("next", "done")``.
 
     Examples:
         >>> import torch, tempfile
