@@ -41,7 +41,7 @@ def dense_ranks(scores: np.ndarray, rtol: float = 0.0, shift: float = 0.0) -> np
         >>> dense_ranks(np.array([3.0, 1.0, 1.0 + 1e-15, 2.0]), rtol=1e-12).tolist()
         [2, 0, 0, 1]
     """
-    order = np.argsort(scores, kind="stable")
+    order = np.argsort(scores)  # equal scores share a rank, so their order among themselves does not matter
     ordered = scores[order]
     tolerance = rtol * np.maximum(np.abs(ordered[1:] + shift), 1.0)
     ranks = np.empty(len(scores), dtype=np.int64)
