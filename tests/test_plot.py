@@ -54,6 +54,14 @@ def test_plot_groups_seeds_and_draws_a_png(tmp_path, capsys):
     assert image.shape[0] > 100 and image.std() > 10  # a real figure, not a blank canvas
 
 
+def test_a_run_of_one_epoch_is_drawn_as_a_point_and_longer_ones_as_lines(tmp_path):
+    write_run(tmp_path / "sweep/push-standard/her/quick/seed0", [0.0])  # a line through one point draws nothing
+    write_run(tmp_path / "sweep/push-standard/cebp/quick/seed0", [0.0, 0.1])
+    (ax,) = draw_sweep(tmp_path / "sweep").axes
+    markers = {label.split(",")[0]: line.get_marker() for label, line in legend(ax).items()}
+    assert markers == {"HER": "o", "CEBP (paper form)": "None"}
+
+
 def test_title_replaces_a_single_panels_folder_name_and_tops_several(tmp_path):
     write_run(tmp_path / "learning/her/seed0", [0.0, 0.1])
     assert [ax.get_title() for ax in draw_sweep(tmp_path / "learning").axes] == ["learning"]

@@ -587,6 +587,7 @@ def draw_sweep(
             epochs = np.arange(1, len(mean) + 1)
             colour = sampler_colour[sampler_of(label)]
             ax.plot(epochs[:complete], mean[:complete], color=colour, linestyle=linestyle[label],
+                    marker="o" if complete == 1 else None,  # a line through one epoch draws nothing
                     label=textwrap.fill(f"{method_label(label)} ({seed_coverage(seeds)})", LEGEND_WIDTH))
             ax.fill_between(epochs[:complete], low[:complete], high[:complete], color=colour, alpha=0.2)
             if complete < len(mean):
