@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from tensordict import NonTensorData
+from tensordict import NonTensorData, TensorDict
 from torchrl.data import LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
 from tests.modules import load_module
@@ -273,3 +273,18 @@ def test_a_pair_read_takes_each_row_among_the_filled_ones_as_torchrl_storage_doe
             ours.get((torch.tensor([0, outside]), torch.tensor([0, 1])))
         with pytest.raises(IndexError):
             theirs.get((torch.tensor([0, outside]), torch.tensor([0, 1])))
+
+
+def test_a_memmap_storage_loaded_into_another_live_storages_scratch_dir_is_refused_not_shared(tmp_path):
+    first = EpisodeMemmapStorage(4 * 50, scratch_dir=str(tmp_path))
+    first.set(torch.arange(2), TensorDict({"observation": torch.ones(2, 50, 3)}, [2, 50]))
+    second = EpisodeMemmapStorage(4 * 50, scratch_dir=str(tmp_path))  # one config, one scratch_dir
+    state = first.state_dict()
+    state[_upstream.STORAGE_STATE_KEY]["observation"] = torch.full((2, 50, 3), 7.0)  # other episodes
+    with pytest.raises(RuntimeError, match=rf"scratch_dir {re.escape(str(tmp_path))}/? already holds memory-mapped "
+                                           "files .* give each storage a scratch_dir of its own"):
+        second.load_state_dict(state)
+    assert (first.get(torch.arange(2))["observation"] == 1).all()  # the first storage's rows are its own still
+    third = EpisodeMemmapStorage(4 * 50, scratch_dir=str(tmp_path / "own"))
+    third.load_state_dict(state)
+    assert (third.get(torch.arange(2))["observation"] == 7).all()

@@ -222,7 +222,7 @@ class _EpisodeRows:
                 full = saved.apply(lambda t: torch.empty((rows, *t.shape[1:]), dtype=t.dtype),
                                    batch_size=[rows, *saved.shape[1:]])
                 if memmap := isinstance(self, LazyMemmapStorage):  # into files in its scratch_dir, as a first write
-                    full = full.memmap_like(prefix=self.scratch_dir)
+                    full = self._memmap_into_scratch_dir(full)
                 full[: saved.shape[0]] = saved
                 state_dict = {**state_dict, _upstream.STORAGE_STATE_KEY: full.state_dict()}
                 # TorchRL loads into a stored tensordict by reference (a memmap one: in place, into its own files),
@@ -230,6 +230,18 @@ class _EpisodeRows:
                 _upstream.replace_stored_tensordict(self, full if memmap else TensorDict())
         super().load_state_dict(state_dict)
         self._after_load()
+
+    def _memmap_into_scratch_dir(self, data: TensorDictBase) -> TensorDictBase:
+        # As TorchRL's first write into a LazyMemmapStorage: files already in the folder (another storage's, which may
+        # be live) are refused unless existsok, not shared, so that two storages never read and write one file. A
+        # written storage's files are its own (its first write refused any others), and it lays them out again.
+        try:
+            return data.memmap_like(prefix=self.scratch_dir, existsok=self.existsok or self.initialized)
+        except RuntimeError as error:
+            if "already exists" not in str(error):
+                raise
+            raise RuntimeError(f"scratch_dir {self.scratch_dir} already holds memory-mapped files ({error}): another "
+                               "storage's, which would share them; give each storage a scratch_dir of its own") from None
 
     def loads(self, path: Any) -> None:
         """Loads what TorchRL's ``dumps`` wrote into ``path``, as :meth:`load_state_dict` loads a state.
