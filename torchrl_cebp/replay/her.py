@@ -106,9 +106,8 @@ class HindsightRelabel(SampleUnit):
         flat = torch.add(steps, rows, alpha=episodes.shape[1])
         stored_goal = require_key(episodes, self.goal_key, (None,)).flatten(0, 1).index_select(0, flat)
         achieved = episodes.get(self.next_achieved_goal_key).flatten(0, 1).index_select(0, flat)
-        stored_reward = episodes.get(self.reward_key, None)
-        stored_reward = None if stored_reward is None else (flat.shape + stored_reward.shape[2:], stored_reward.dtype)
-        entries = self._relabelled(relabel, candidate, stored_goal, achieved, stored_reward)
+        entries = self._relabelled(relabel, candidate, stored_goal, achieved,
+                                   self._reward_layout(episodes, flat.shape, per_transition_dims=2))
         if self.relabelled_key is not None:
             entries[self.relabelled_key] = relabel
         return entries
@@ -127,6 +126,13 @@ class HindsightRelabel(SampleUnit):
         if stored_reward is not None:
             reward = self._as_stored(torch.as_tensor(reward), *stored_reward)
         return {self.goal_key: goal, next_key(self.goal_key): goal, self.reward_key: reward}
+
+    def _reward_layout(self, data: TensorDictBase, transitions: torch.Size,
+                       per_transition_dims: int) -> tuple[torch.Size, torch.dtype] | None:
+        # The shape and dtype a relabelled reward of ``transitions`` takes: the stored reward's, after its
+        # ``per_transition_dims`` leading dims; None where no reward is stored.
+        stored = data.get(self.reward_key, None)
+        return None if stored is None else (transitions + stored.shape[per_transition_dims:], stored.dtype)
 
     def _as_stored(self, reward: torch.Tensor, shape: torch.Size, dtype: torch.dtype) -> torch.Tensor:
         """``reward_fn``'s reward in the stored reward's shape and dtype: one of as many elements is reshaped (the
@@ -239,10 +245,8 @@ class HindsightRelabel(SampleUnit):
                                "TensorDictReplayBuffer(sample_unit=her, ...)")
         self._pending.draw = None
         self._collated = True
-        stored_reward = data.get(self.reward_key, None)
-        stored_reward = None if stored_reward is None else (stored_reward.shape, stored_reward.dtype)
         entries = self._relabelled(*draw, data.get(self.goal_key), data.get(self.next_achieved_goal_key),
-                                   stored_reward)
+                                   self._reward_layout(data, data.shape, per_transition_dims=len(data.shape)))
         for key, value in entries.items():
             data.set(key, value)
         if self.success_key is not None and data.get(self.success_key, None) is not None:
